@@ -1,0 +1,107 @@
+#include "bvhopt/bvh.h"
+
+#include <utility>
+
+namespace bvhopt {
+
+void Bvh::refit_upwards(uint32_t node) {
+  for (uint32_t n = node; n != kInvalidNode; n = nodes[n].parent) {
+    BvhNode& nd = nodes[n];
+    if (nd.is_leaf()) continue;
+    Box b = merge(nodes[nd.left()].box, nodes[nd.right()].box);
+    // Above an unchanged box nothing changes either.
+    if (b == nd.box && n != node) break;
+    nd.set_box(b);
+  }
+}
+
+void Bvh::refit(const PrimitiveRefs& refs) {
+  for (uint32_t n : post_order()) {
+    BvhNode& nd = nodes[n];
+    Box b;
+    if (nd.is_leaf()) {
+      for (uint32_t i = 0; i < nd.ref_count(); ++i) b.extend(refs.boxes[ref_indices[nd.first_ref() + i]]);
+    } else {
+      b = merge(nodes[nd.left()].box, nodes[nd.right()].box);
+    }
+    nd.set_box(b);
+  }
+}
+
+std::vector<uint32_t> Bvh::depth_first_order() const {
+  std::vector<uint32_t> order;
+  if (empty()) return order;
+  order.reserve(nodes.size());
+  std::vector<uint32_t> stack{root};
+  while (!stack.empty()) {
+    uint32_t n = stack.back();
+    stack.pop_back();
+    order.push_back(n);
+    if (!nodes[n].is_leaf()) {
+      stack.push_back(nodes[n].right());
+      stack.push_back(nodes[n].left());
+    }
+  }
+  return order;
+}
+
+std::vector<uint32_t> Bvh::post_order() const {
+  // Reverse of a pre-order that visits right before left is a post-order visiting left first.
+  std::vector<uint32_t> order;
+  if (empty()) return order;
+  order.reserve(nodes.size());
+  std::vector<uint32_t> stack{root};
+  while (!stack.empty()) {
+    uint32_t n = stack.back();
+    stack.pop_back();
+    order.push_back(n);
+    if (!nodes[n].is_leaf()) {
+      stack.push_back(nodes[n].left());
+      stack.push_back(nodes[n].right());
+    }
+  }
+  return {order.rbegin(), order.rend()};
+}
+
+void Bvh::compact() {
+  if (empty()) {
+    nodes.clear();
+    return;
+  }
+  std::vector<uint32_t> order = depth_first_order();
+  std::vector<uint32_t> new_index(nodes.size(), kInvalidNode);
+  for (uint32_t i = 0; i < order.size(); ++i) new_index[order[i]] = i;
+
+  std::vector<BvhNode> new_nodes(order.size());
+  std::vector<uint32_t> new_refs;
+  new_refs.reserve(ref_indices.size());
+  for (uint32_t i = 0; i < order.size(); ++i) {
+    BvhNode nd = nodes[order[i]];
+    nd.parent = nd.parent == kInvalidNode ? kInvalidNode : new_index[nd.parent];
+    if (nd.is_leaf()) {
+      uint32_t first = static_cast<uint32_t>(new_refs.size());
+      for (uint32_t k = 0; k < nd.ref_count(); ++k) new_refs.push_back(ref_indices[nd.first_ref() + k]);
+      nd.make_leaf(first, nd.ref_count());
+    } else {
+      nd.make_inner(new_index[nd.left()], new_index[nd.right()]);
+    }
+    new_nodes[i] = nd;
+  }
+  nodes = std::move(new_nodes);
+  ref_indices = std::move(new_refs);
+  root = 0;
+}
+
+size_t Bvh::leaf_count() const {
+  size_t count = 0;
+  for (uint32_t n : depth_first_order()) count += nodes[n].is_leaf();
+  return count;
+}
+
+size_t Bvh::inner_count() const {
+  size_t count = 0;
+  for (uint32_t n : depth_first_order()) count += !nodes[n].is_leaf();
+  return count;
+}
+
+}  // namespace bvhopt

@@ -1,0 +1,98 @@
+#include "test_support.h"
+
+#include <cstdlib>
+#include <limits>
+#include <vector>
+
+namespace bvhopt::testing {
+
+std::filesystem::path scenes_dir() {
+  if (const char* env = std::getenv("BVHOPT_SCENES"); env && *env) return env;
+  return BVHOPT_DEFAULT_SCENES_DIR;
+}
+
+Mesh random_mesh(uint32_t triangles, uint64_t seed, bool with_degenerate) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> pos(0.0f, 100.0f);
+  std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+  std::uniform_real_distribution<float> logsize(-1.0f, 1.0f);
+  Mesh mesh;
+  mesh.name = "random(" + std::to_string(seed) + ")";
+  for (uint32_t t = 0; t < triangles; ++t) {
+    Vec3 c(pos(rng), pos(rng), pos(rng));
+    float s = std::pow(10.0f, logsize(rng));
+    uint32_t base = static_cast<uint32_t>(mesh.vertex_count());
+    Vec3 a = c + Vec3(unit(rng), unit(rng), unit(rng)) * s;
+    Vec3 b = c + Vec3(unit(rng), unit(rng), unit(rng)) * s;
+    Vec3 d = c + Vec3(unit(rng), unit(rng), unit(rng)) * s;
+    if (with_degenerate && t % 7 == 3) d = a;  // coincident vertices: zero area
+    mesh.add_vertex(a);
+    mesh.add_vertex(b);
+    mesh.add_vertex(d);
+    mesh.add_triangle(base, base + 1, base + 2);
+  }
+  return mesh;
+}
+
+PrimitiveRefs random_refs(uint32_t count, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> pos(0.0f, 10.0f);
+  std::uniform_real_distribution<float> size(0.01f, 2.0f);
+  std::vector<Box> boxes(count);
+  for (auto& b : boxes) {
+    Vec3 lo(pos(rng), pos(rng), pos(rng));
+    b = Box(lo, lo + Vec3(size(rng), size(rng), size(rng)));
+  }
+  return make_references(boxes);
+}
+
+double optimal_tree_cost(const PrimitiveRefs& refs, double c_t, double c_i) {
+  const uint32_t n = static_cast<uint32_t>(refs.size());
+  const uint32_t full = (1u << n) - 1;
+  std::vector<double> area(full + 1, 0.0), best(full + 1, std::numeric_limits<double>::infinity());
+  for (uint32_t s = 1; s <= full; ++s) {
+    Box b;
+    for (uint32_t i = 0; i < n; ++i)
+      if (s & (1u << i)) b.extend(refs.boxes[i]);
+    area[s] = b.area();
+  }
+  for (uint32_t s = 1; s <= full; ++s) {
+    if ((s & (s - 1)) == 0) {  // one reference: a leaf
+      best[s] = c_i * area[s];
+      continue;
+    }
+    // Each unordered split once: the part holding the lowest set bit is the left one.
+    uint32_t low = s & (~s + 1);
+    for (uint32_t l = (s - 1) & s; l > 0; l = (l - 1) & s) {
+      if (!(l & low)) continue;
+      double c = best[l] + best[s ^ l];
+      if (c < best[s]) best[s] = c;
+    }
+    best[s] += c_t * area[s];
+  }
+  return best[full];
+}
+
+std::string tree_signature(const Bvh& bvh, const PrimitiveRefs& refs) {
+  if (bvh.empty()) return "";
+  auto rec = [&](auto&& self, uint32_t n) -> std::string {
+    const BvhNode& nd = bvh[n];
+    if (nd.is_leaf()) {
+      std::string s = "[";
+      for (uint32_t i = 0; i < nd.ref_count(); ++i) {
+        if (i) s += ' ';
+        s += std::to_string(refs.triangle_ids[bvh.ref_indices[nd.first_ref() + i]]);
+      }
+      return s + "]";
+    }
+    std::string s = "(";
+    s += self(self, nd.left());
+    s += ',';
+    s += self(self, nd.right());
+    s += ')';
+    return s;
+  };
+  return rec(rec, bvh.root);
+}
+
+}  // namespace bvhopt::testing

@@ -1,0 +1,33 @@
+// Helpers shared by the tests: random scenes, the scenes folder, tree invariants.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <random>
+#include <string>
+
+#include "bvhopt/bvh.h"
+#include "bvhopt/mesh.h"
+#include "bvhopt/references.h"
+
+namespace bvhopt::testing {
+
+// The shared scenes folder: $BVHOPT_SCENES if set, else ../shared/scenes beside the repository.
+std::filesystem::path scenes_dir();
+
+// A soup of `triangles` random triangles in [0, extent]^3, sizes varying over two orders of
+// magnitude, with some degenerate ones when `with_degenerate` is set. Deterministic in seed.
+Mesh random_mesh(uint32_t triangles, uint64_t seed, bool with_degenerate = false);
+
+// `count` random boxes, for builder and optimizer tests that need no triangles.
+PrimitiveRefs random_refs(uint32_t count, uint64_t seed);
+
+// The exact minimum SAH cost (c_T, c_I) over all binary trees with one reference per leaf,
+// by dynamic programming over subsets; count <= 12. Not normalized by the root area.
+double optimal_tree_cost(const PrimitiveRefs& refs, double c_t, double c_i);
+
+// A tree in which each node's children appear in the same order, as a string such as
+// "((0,1),2)" of triangle ids: two trees are the same tree exactly when the strings match.
+std::string tree_signature(const Bvh& bvh, const PrimitiveRefs& refs);
+
+}  // namespace bvhopt::testing
