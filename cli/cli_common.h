@@ -1,0 +1,66 @@
+// What every subcommand shares: thread count, scene options, JSON output, the progress line.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <tbb/global_control.h>
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "bvhopt/mesh.h"
+#include "bvhopt/vec3.h"
+
+namespace bvhopt::cli {
+
+// --threads N (default: all cores). Keep the returned object alive for the command's run.
+struct ThreadsOption {
+  int threads = 0;
+  void add_to(CLI::App* app);
+  std::unique_ptr<tbb::global_control> apply() const;
+  int effective() const;  // the number of threads actually used
+};
+
+// A scene argument plus the options that shape it wherever a scene is loaded.
+struct SceneOption {
+  std::string spec;       // a file, or builtin[:atrium][?triangles=N&seed=S]
+  std::string rotate;     // "X,Y,Z" degrees, empty for none
+  void add_to(CLI::App* app, const std::string& name = "scene", bool required = true);
+  Mesh load() const;      // loads, checks and rotates; throws Error
+};
+
+// Seconds since construction.
+class Stopwatch {
+ public:
+  double seconds() const {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  }
+ private:
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+};
+
+// A single status line redrawn on stderr, only when stderr is a terminal and at most a few
+// times a second, so pipes and CI logs stay clean.
+class ProgressLine {
+ public:
+  ProgressLine();
+  ~ProgressLine();
+  void update(const std::string& text, bool force = false);
+  void finish();  // clears the line
+ private:
+  bool enabled_;
+  bool drawn_ = false;
+  std::chrono::steady_clock::time_point last_{};
+};
+
+bool stderr_is_terminal();
+
+// Prints JSON to stdout (pretty, with a trailing newline).
+void print_json(const nlohmann::json& j);
+
+// Fixed-width table printing for human output.
+std::string format_double(double v, int precision);
+
+}  // namespace bvhopt::cli
