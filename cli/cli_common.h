@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "bvhopt/cost_model.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/vec3.h"
 
@@ -29,6 +30,14 @@ struct SceneOption {
   std::string rotate;     // "X,Y,Z" degrees, empty for none
   void add_to(CLI::App* app, const std::string& name = "scene", bool required = true);
   Mesh load() const;      // loads, checks and rotates; throws Error
+};
+
+// --ct / --ci: the SAH cost constants.
+struct CostOption {
+  double traversal = 3.0;
+  double intersection = 2.0;
+  void add_to(CLI::App* app);
+  CostModel model() const { return CostModel{traversal, intersection}; }
 };
 
 // Seconds since construction.

@@ -9,5 +9,6 @@ void register_info_command(CLI::App& app);
 void register_build_command(CLI::App& app);
 void register_stats_command(CLI::App& app);
 void register_demo_command(CLI::App& app);
+void register_compact_command(CLI::App& app);
 
 }  // namespace bvhopt::cli

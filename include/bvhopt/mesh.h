@@ -41,6 +41,9 @@ struct MeshInfo {
   size_t triangles = 0;
   size_t vertices = 0;
   size_t degenerate_triangles = 0;  // zero area; kept, only counted
+  // The part of degenerate_triangles with two corners at the same point (the rest are
+  // collinear); scene READMEs usually count only these.
+  size_t coincident_triangles = 0;
   Box bounds;
 };
 

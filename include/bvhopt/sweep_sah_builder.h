@@ -14,9 +14,13 @@ struct SweepSahConfig {
   uint32_t parallel_threshold = 4096;
 };
 
-// References are sorted once per axis by centroid; each node sweeps the three sorted
-// lists and partitions them stably, so the whole build is O(n log n). Deterministic:
-// the same tree on any number of threads.
+// References are sorted once per axis by (centroid, id); each node sweeps the three sorted
+// lists and partitions them stably, so the whole build is O(n log n). Every position
+// between two references on every axis is a candidate; the split minimises
+// SA(L) n_L + SA(R) n_R, ties going to the more balanced split, then to the lower axis
+// and position. A node whose centroids all coincide is halved in id order. Deterministic:
+// the same tree on any number of threads. Memory: the tree (80 bytes per reference with
+// leaves of one) plus 13 bytes per reference of scratch.
 Bvh build_sweep_sah(const PrimitiveRefs& refs, const SweepSahConfig& config = {});
 
 }  // namespace bvhopt

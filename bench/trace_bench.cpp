@@ -1,0 +1,469 @@
+// Ray tracing benchmark (issue 6): our single-ray traversal of binary trees against Embree 3
+// (its own MEDIUM-quality BVH, rtcIntersect1 / rtcOccluded1 per ray) tracing the very same
+// rays in the same run, on 1 and 2 threads; the two child orders; leaf sizes 1, <=4, <=8;
+// and the correlation of SAH cost with time per ray across the trees of each scene.
+//
+//   trace_bench [--scenes DIR] [--scene FILE]... [--count N] [--repeats R]
+//               [--kinds primary,random,ao] [--optimizers] [--quick] [--opt-seconds S] [--json FILE]
+//
+// Every figure is the median of R timed passes; the candidates are timed round-robin within
+// each repeat so machine load drifts alike over all of them. Ratios are ours / Embree's.
+// 1-thread figures use the calling thread's CPU time (all the work runs there when oneTBB
+// allows one thread), so a shared machine does not skew them; --wall uses wall time.
+// 2-thread figures are wall time: they are only meaningful on an otherwise idle machine.
+#include <tbb/blocked_range.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#ifdef BVHOPT_HAVE_EMBREE
+#include <embree3/rtcore.h>
+#endif
+
+#include <algorithm>
+#include <chrono>
+#include <ctime>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bvhopt/build.h"
+#include "bvhopt/cost.h"
+#include "bvhopt/error.h"
+#include "bvhopt/finalize.h"
+#include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/ray_measure.h"
+#include "bvhopt/ray_sets.h"
+#include "bvhopt/references.h"
+#include "bvhopt/scene.h"
+#include "bvhopt/traversal.h"
+#include "bvhopt/tree_rotations.h"
+
+namespace bvhopt {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Options {
+  fs::path scenes_dir;
+  std::vector<std::string> scenes;
+  uint64_t count = 1'000'000;
+  int repeats = 5;
+  std::vector<RayKind> kinds{RayKind::primary, RayKind::random, RayKind::ao};
+  bool optimizers = false;
+  bool quick = false;
+  bool wall = false;   // 1-thread figures from wall time instead of thread CPU time  // only the leaf-1 sweep tree (for A/B runs while tuning)
+  double opt_seconds = 10.0;
+  std::string json_path;
+};
+
+std::vector<std::string> split_list(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  for (std::string item; std::getline(ss, item, ',');)
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+Options parse(int argc, char** argv) {
+  Options o;
+  const char* env = std::getenv("BVHOPT_SCENES");
+  o.scenes_dir = env ? fs::path(env) : fs::path("../shared/scenes");
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw Error("trace_bench: " + a + " needs a value");
+      return argv[++i];
+    };
+    if (a == "--scenes") o.scenes_dir = value();
+    else if (a == "--scene") o.scenes.push_back(value());
+    else if (a == "--count") o.count = std::stoull(value());
+    else if (a == "--repeats") o.repeats = std::max(1, std::stoi(value()));
+    else if (a == "--json") o.json_path = value();
+    else if (a == "--optimizers") o.optimizers = true;
+    else if (a == "--quick") o.quick = true;
+    else if (a == "--wall") o.wall = true;
+    else if (a == "--opt-seconds") o.opt_seconds = std::stod(value());
+    else if (a == "--kinds") {
+      o.kinds.clear();
+      for (const std::string& k : split_list(value())) {
+        auto kind = parse_ray_kind(k);
+        if (!kind) throw Error("trace_bench: unknown ray kind '" + k + "'");
+        o.kinds.push_back(*kind);
+      }
+    } else if (a == "--help" || a == "-h") {
+      std::cout << "trace_bench [--scenes DIR] [--scene FILE]... [--count N] [--repeats R]\n"
+                   "            [--kinds primary,random,ao,path,shadow] [--optimizers] [--opt-seconds S]\n"
+                   "            [--quick] [--wall]   (only the leaf-1 sweep tree)\n"
+                   "            [--json FILE]\n";
+      std::exit(0);
+    } else {
+      throw Error("trace_bench: unknown option '" + a + "'");
+    }
+  }
+  if (o.scenes.empty()) {
+    if (!fs::is_directory(o.scenes_dir)) throw Error(o.scenes_dir.string() + ": scenes folder not found (--scenes)");
+    for (const auto& e : fs::directory_iterator(o.scenes_dir)) {
+      const std::string ext = e.path().extension().string();
+      if (ext == ".obj" || ext == ".ply" || ext == ".glb" || ext == ".gltf") o.scenes.push_back(e.path().string());
+    }
+    std::sort(o.scenes.begin(), o.scenes.end());
+  }
+  return o;
+}
+
+double seconds_of(const std::function<void()>& f) {
+  const auto start = std::chrono::steady_clock::now();
+  f();
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// CPU time of the calling thread. With one thread allowed, oneTBB runs the whole
+// parallel_for on the calling thread, so this is the work of the trace alone, robust to the
+// machine being shared (wall time counts the time other processes hold the core).
+double thread_cpu_seconds_of(const std::function<void()>& f) {
+  timespec a{}, b{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
+  f();
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
+  return double(b.tv_sec - a.tv_sec) + 1e-9 * double(b.tv_nsec - a.tv_nsec);
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0.0 : v[v.size() / 2];
+}
+
+double pearson(const std::vector<double>& x, const std::vector<double>& y) {
+  const size_t n = x.size();
+  if (n < 3) return std::nan("");
+  double mx = 0, my = 0;
+  for (size_t i = 0; i < n; ++i) mx += x[i], my += y[i];
+  mx /= double(n);
+  my /= double(n);
+  double sxy = 0, sxx = 0, syy = 0;
+  for (size_t i = 0; i < n; ++i) {
+    sxy += (x[i] - mx) * (y[i] - my);
+    sxx += (x[i] - mx) * (x[i] - mx);
+    syy += (y[i] - my) * (y[i] - my);
+  }
+  return sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : std::nan("");
+}
+
+#ifdef BVHOPT_HAVE_EMBREE
+struct EmbreeScene {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  double build_seconds = 0.0;
+
+  explicit EmbreeScene(const Mesh& mesh) {
+    device = rtcNewDevice("threads=1");
+    if (!device) throw Error("embree: rtcNewDevice failed");
+    build_seconds = seconds_of([&] {
+      scene = rtcNewScene(device);
+      rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
+      RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+      auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                             3 * sizeof(float), mesh.vertex_count()));
+      auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                                3 * sizeof(unsigned), mesh.triangle_count()));
+      std::copy(mesh.positions.begin(), mesh.positions.end(), vb);
+      std::copy(mesh.indices.begin(), mesh.indices.end(), ib);
+      rtcCommitGeometry(g);
+      rtcAttachGeometry(scene, g);
+      rtcReleaseGeometry(g);
+      rtcCommitScene(scene);
+    });
+  }
+  ~EmbreeScene() {
+    if (scene) rtcReleaseScene(scene);
+    if (device) rtcReleaseDevice(device);
+  }
+
+  void trace(const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits) const {
+    hits.resize(rays.size());
+    const Ray* in = rays.data();
+    Hit* out = hits.data();
+    RTCScene sc = scene;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), 256), [=](const tbb::blocked_range<size_t>& r) {
+      RTCIntersectContext ctx;
+      rtcInitIntersectContext(&ctx);
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        const Ray& ray = in[i];
+        if (query == RayQuery::closest) {
+          RTCRayHit rh;
+          rh.ray.org_x = ray.org.x;
+          rh.ray.org_y = ray.org.y;
+          rh.ray.org_z = ray.org.z;
+          rh.ray.tnear = ray.tmin;
+          rh.ray.dir_x = ray.dir.x;
+          rh.ray.dir_y = ray.dir.y;
+          rh.ray.dir_z = ray.dir.z;
+          rh.ray.time = 0.0f;
+          rh.ray.tfar = ray.tmax;
+          rh.ray.mask = 0xffffffffu;
+          rh.ray.id = 0;
+          rh.ray.flags = 0;
+          rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+          rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+          rtcIntersect1(sc, &ctx, &rh);
+          Hit h;
+          if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
+            h.t = rh.ray.tfar;
+            h.u = rh.hit.u;
+            h.v = rh.hit.v;
+            h.triangle_id = rh.hit.primID;
+          }
+          out[i] = h;
+        } else {
+          RTCRay rr;
+          rr.org_x = ray.org.x;
+          rr.org_y = ray.org.y;
+          rr.org_z = ray.org.z;
+          rr.tnear = ray.tmin;
+          rr.dir_x = ray.dir.x;
+          rr.dir_y = ray.dir.y;
+          rr.dir_z = ray.dir.z;
+          rr.time = 0.0f;
+          rr.tfar = ray.tmax;
+          rr.mask = 0xffffffffu;
+          rr.id = 0;
+          rr.flags = 0;
+          rtcOccluded1(sc, &ctx, &rr);
+          Hit h;
+          if (rr.tfar < 0.0f) h.triangle_id = 0;
+          out[i] = h;
+        }
+      }
+    });
+  }
+};
+#endif
+
+struct Tree {
+  std::string name;
+  double sah = 0.0;
+  double seconds = 0.0;  // build (+ optimize) time
+  std::unique_ptr<Tracer> tracer;
+};
+
+// Fraction of rays on which two tracers agree: both miss, or both hit at distances within
+// 1e-4 relative (different triangles at one distance are a tie, not a disagreement).
+double agreement(const std::vector<Hit>& a, const std::vector<Hit>& b, RayQuery query) {
+  size_t same = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (a[i].hit() != b[i].hit()) continue;
+    if (!a[i].hit() || query == RayQuery::any ||
+        std::fabs(a[i].t - b[i].t) <= 1e-4f * std::max(std::fabs(a[i].t), 1e-6f))
+      ++same;
+  }
+  return a.empty() ? 1.0 : double(same) / double(a.size());
+}
+
+int run(const Options& opt) {
+  using nlohmann::json;
+  json out = json::array();
+  std::printf("# trace_bench: %u hardware threads; Mrays/s = median of %d passes; ratio = ours / Embree\n",
+              std::thread::hardware_concurrency(), opt.repeats);
+#ifndef BVHOPT_HAVE_EMBREE
+  std::printf("# Embree not found at configure time: no peer figures\n");
+#endif
+  for (const std::string& scene_path : opt.scenes) {
+    Mesh mesh;
+    try {
+      mesh = load_mesh_file(scene_path);
+    } catch (const Error& e) {
+      std::fprintf(stderr, "skipping %s: %s\n", scene_path.c_str(), e.what());
+      continue;
+    }
+    const std::string scene = fs::path(scene_path).filename().string();
+    const PrimitiveRefs refs = make_references(mesh);
+
+    std::vector<Tree> trees;
+    auto add_tree = [&](const std::string& name, Bvh bvh, double secs) {
+      Tree t;
+      t.name = name;
+      t.sah = sah_cost(bvh);
+      t.seconds = secs;
+      t.tracer = std::make_unique<Tracer>(finalize(bvh, refs), mesh);
+      trees.push_back(std::move(t));
+    };
+    Bvh sweep1;
+    for (uint32_t leaf : {1u, 4u, 8u}) {
+      BuildOptions b;
+      b.leaf.max_leaf_size = leaf;
+      Bvh bvh;
+      const double s = seconds_of([&] { bvh = build_bvh(refs, b); });
+      if (leaf == 1) sweep1 = bvh;
+      if (opt.quick && leaf != 1) continue;
+      add_tree("sweep-l" + std::to_string(leaf), std::move(bvh), s);
+    }
+    for (BuilderKind k : {BuilderKind::binned_sah, BuilderKind::spatial_median, BuilderKind::object_median}) {
+      if (opt.quick) break;
+      BuildOptions b;
+      b.kind = k;
+      Bvh bvh;
+      const double s = seconds_of([&] { bvh = build_bvh(refs, b); });
+      add_tree(std::string(builder_name(k)) + "-l1", std::move(bvh), s);
+    }
+    if (opt.optimizers) {
+      {
+        Bvh bvh = sweep1;
+        HillClimbConfig c;
+        c.limits.time_limit = opt.opt_seconds;
+        const double s = seconds_of([&] { hill_climb(bvh, c); });
+        add_tree("sweep+hill", std::move(bvh), s);
+      }
+      {
+        Bvh bvh = sweep1;
+        AnnealConfig c;
+        c.limits.time_limit = opt.opt_seconds;
+        const double s = seconds_of([&] { anneal(bvh, c); });
+        add_tree("sweep+anneal", std::move(bvh), s);
+      }
+      {
+        Bvh bvh = sweep1;
+        InsertionConfig c;
+        c.time_limit_seconds = opt.opt_seconds;
+        const double s = seconds_of([&] { optimize_insertion(bvh, c); });
+        add_tree("sweep+insertion", std::move(bvh), s);
+      }
+    }
+#ifdef BVHOPT_HAVE_EMBREE
+    const EmbreeScene embree(mesh);
+#endif
+    std::printf("\n## %s: %zu triangles\n", scene.c_str(), mesh.triangle_count());
+    std::printf("%-8s %8s %6s | %-16s %7s %7s %7s | %7s %7s %7s %7s | %6s %6s | %6s\n", "rays", "count", "hit%",
+                "tree", "1t", "dist1t", "embr1t", "ratio1", "2t", "embr2t", "ratio2", "2t/1t", "steps", "agree");
+    for (RayKind kind : opt.kinds) {
+      RaySetConfig cfg;
+      cfg.kind = kind;
+      cfg.seed = 1;
+      cfg.count = kind == RayKind::primary ? 0 : opt.count;  // primary: 1024 x 768
+      const RaySet set = make_ray_set(mesh, *trees[0].tracer, cfg);
+      const std::vector<Ray>& rays = set.rays;
+
+      // Candidates: each tree with the default (split-axis) order on 1 thread; the first tree
+      // also with the distance order and on 2 threads; Embree on 1 and 2 threads.
+      struct Candidate {
+        std::string label;
+        int threads;
+        std::function<void(std::vector<Hit>&)> trace;
+        std::vector<double> times;
+      };
+      std::vector<Candidate> cands;
+      for (size_t t = 0; t < trees.size(); ++t) {
+        const Tracer* tr = trees[t].tracer.get();
+        cands.push_back({trees[t].name, 1, [=, &rays, &set](std::vector<Hit>& h) {
+                           trace_rays(*tr, rays, set.query, h, nullptr, ChildOrder::split_axis);
+                         }, {}});
+      }
+      const Tracer* base = trees[0].tracer.get();
+      cands.push_back({"dist", 1, [=, &rays, &set](std::vector<Hit>& h) {
+                         trace_rays(*base, rays, set.query, h, nullptr, ChildOrder::distance);
+                       }, {}});
+      cands.push_back({"ours2", 2, [=, &rays, &set](std::vector<Hit>& h) {
+                         trace_rays(*base, rays, set.query, h, nullptr, ChildOrder::split_axis);
+                       }, {}});
+#ifdef BVHOPT_HAVE_EMBREE
+      for (int th : {1, 2})
+        cands.push_back({th == 1 ? "embree1" : "embree2", th,
+                         [&](std::vector<Hit>& h) { embree.trace(rays, set.query, h); }, {}});
+#endif
+      std::vector<Hit> hits;
+      for (int r = 0; r < opt.repeats; ++r)
+        for (Candidate& c : cands) {
+          tbb::global_control limit(tbb::global_control::max_allowed_parallelism, c.threads);
+          c.times.push_back(c.threads == 1 && !opt.wall ? thread_cpu_seconds_of([&] { c.trace(hits); })
+                                                        : seconds_of([&] { c.trace(hits); }));
+        }
+      auto mrays = [&](const std::string& label) {
+        for (const Candidate& c : cands)
+          if (c.label == label) return double(rays.size()) / median(c.times) / 1e6;
+        return 0.0;
+      };
+
+      RayMeasurement m;
+      {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+        m = measure_rays(*base, rays, set.query, {.repeats = 1});
+      }
+      double agree = std::nan("");
+      double e1 = 0, e2 = 0;
+#ifdef BVHOPT_HAVE_EMBREE
+      std::vector<Hit> ours, theirs;
+      trace_rays(*base, rays, set.query, ours);
+      embree.trace(rays, set.query, theirs);
+      agree = agreement(ours, theirs, set.query);
+      e1 = mrays("embree1");
+      e2 = mrays("embree2");
+#endif
+      const double o1 = mrays(trees[0].name), o2 = mrays("ours2"), a1 = mrays("dist");
+      std::printf("%-8s %8zu %6.1f | %-16s %7.2f %7.2f %7.2f | %7.2f %7.2f %7.2f %7.2f | %6.2f %6.1f | %6.4f\n",
+                  std::string(ray_kind_name(kind)).c_str(), rays.size(), 100.0 * m.hit_rate, trees[0].name.c_str(),
+                  o1, a1, e1, e1 > 0 ? o1 / e1 : 0.0, o2, e2, e2 > 0 ? o2 / e2 : 0.0, o2 / o1, m.steps.mean, agree);
+      json row = {{"scene", scene},
+                  {"triangles", mesh.triangle_count()},
+                  {"rays", std::string(ray_kind_name(kind))},
+                  {"count", rays.size()},
+                  {"hit_rate", m.hit_rate},
+                  {"steps_mean", m.steps.mean},
+                  {"tests_mean", m.triangle_tests.mean},
+                  {"steps_p90", m.steps.p90},
+                  {"ours_1t_mrays", o1},
+                  {"ours_distance_order_1t_mrays", a1},
+                  {"ours_2t_mrays", o2},
+                  {"embree_1t_mrays", e1},
+                  {"embree_2t_mrays", e2},
+                  {"ratio_1t", e1 > 0 ? o1 / e1 : 0.0},
+                  {"ratio_2t", e2 > 0 ? o2 / e2 : 0.0},
+                  {"scaling_2t", o2 / o1},
+                  {"agreement_with_embree", agree}};
+      std::vector<double> costs, ns_per_ray;
+      json tree_rows = json::array();
+      for (const Tree& t : trees) {
+        const double mr = mrays(t.name);
+        costs.push_back(t.sah);
+        ns_per_ray.push_back(1e3 / mr);
+        tree_rows.push_back({{"tree", t.name}, {"sah", t.sah}, {"build_seconds", t.seconds}, {"mrays_1t", mr},
+                             {"ratio_1t", e1 > 0 ? mr / e1 : 0.0}});
+        if (&t != &trees[0])
+          std::printf("%-8s %8s %6s | %-16s %7.2f %7s %7s | %7.2f   (SAH %.2f)\n", "", "", "", t.name.c_str(), mr, "",
+                      "", e1 > 0 ? mr / e1 : 0.0, t.sah);
+      }
+      row["trees"] = tree_rows;
+      row["sah_vs_time_correlation"] = pearson(costs, ns_per_ray);
+      std::printf("%-8s correlation(SAH cost, ns/ray) over %zu trees: %.3f   (sweep-l1 SAH %.2f)\n", "",
+                  trees.size(), pearson(costs, ns_per_ray), trees[0].sah);
+      out.push_back(row);
+      std::fflush(stdout);
+    }
+  }
+  if (!opt.json_path.empty()) {
+    std::ofstream f(opt.json_path);
+    f << out.dump(2) << "\n";
+    if (!f) throw Error(opt.json_path + ": cannot write");
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace bvhopt
+
+int main(int argc, char** argv) {
+  try {
+    return bvhopt::run(bvhopt::parse(argc, argv));
+  } catch (const bvhopt::Error& e) {
+    std::fprintf(stderr, "trace_bench: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,153 @@
+// bvhopt trace: trace a ray set through a BVH file and report speed and work per ray.
+#include <tbb/info.h>
+
+#include <iostream>
+#include <optional>
+
+#include "bvhopt/ray_measure.h"
+#include "bvhopt/ray_sets.h"
+#include "cli_common.h"
+#include "trace_common.h"
+
+namespace bvhopt::cli {
+
+void register_trace_command(CLI::App& app);
+
+namespace {
+
+nlohmann::json distribution_json(const CountDistribution& d) {
+  return {{"mean", d.mean}, {"p50", d.p50}, {"p90", d.p90}, {"p99", d.p99}, {"max", d.max},
+          {"histogram_bin_width", 10}, {"histogram", d.histogram}};
+}
+
+std::string histogram_line(const CountDistribution& d) {
+  // Percent of rays per 10-wide bin, the last bin open-ended.
+  uint64_t total = 0;
+  for (uint64_t h : d.histogram) total += h;
+  std::string s;
+  for (size_t i = 0; i < d.histogram.size(); ++i) {
+    if (d.histogram[i] == 0) continue;
+    s += "  " + std::to_string(10 * i) + (i + 1 == d.histogram.size() ? "+" : "") + ":" +
+         format_double(100.0 * double(d.histogram[i]) / double(total), 1) + "%";
+  }
+  return s;
+}
+
+}  // namespace
+
+void register_trace_command(CLI::App& app) {
+  struct Options {
+    std::string bvh_file;
+    SceneOption scene;
+    ThreadsOption threads;
+    std::string rays = "primary";
+    uint64_t count = 0;
+    uint64_t seed = 1;
+    bool json = false;
+    std::string save_rays, load_rays;
+    std::string order = "axis";
+    uint64_t check = 1000;
+    int repeats = 3;
+    uint32_t width = 1024, height = 768;
+  };
+  auto opt = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand("trace", "Trace a ray set through a BVH file: rays per second, steps, hit rate");
+  cmd->add_option("bvh", opt->bvh_file, "BVH file (from bvhopt build or optimize)")->required()->type_name("FILE.bvh");
+  opt->scene.add_to(cmd, "--scene", true);
+  cmd->add_option("--rays", opt->rays, "Ray set: primary | random | ao | path | shadow")
+      ->check(CLI::IsMember({"primary", "random", "ao", "path", "shadow"}))
+      ->capture_default_str();
+  cmd->add_option("--count", opt->count, "Rays (default: 1024x768 primary, 1,000,000 otherwise)")->type_name("N");
+  cmd->add_option("--seed", opt->seed, "Seed of the ray set")->capture_default_str();
+  cmd->add_option("--width", opt->width, "Camera image width")->check(CLI::Range(1u, 16384u))->capture_default_str();
+  cmd->add_option("--height", opt->height, "Camera image height")->check(CLI::Range(1u, 16384u))->capture_default_str();
+  cmd->add_option("--order", opt->order, "Near child first by: axis (split axis and ray sign) | distance")
+      ->check(CLI::IsMember({"axis", "distance"}))
+      ->capture_default_str();
+  cmd->add_option("--check", opt->check, "Rays checked against brute force (0: none)")->capture_default_str();
+  cmd->add_option("--repeats", opt->repeats, "Timed passes (median reported)")->check(CLI::Range(1, 100))->capture_default_str();
+  cmd->add_option("--save-rays", opt->save_rays, "Write the ray set to this ray file")->type_name("FILE");
+  cmd->add_option("--load-rays", opt->load_rays, "Trace the rays of this ray file instead of generating them")
+      ->type_name("FILE");
+  opt->threads.add_to(cmd);
+  cmd->add_flag("--json", opt->json, "Print the results as JSON");
+  cmd->callback([opt] {
+    auto threads = opt->threads.apply();
+    const Mesh mesh = opt->scene.load();
+    const LoadedTree tree = load_tree_for_scene(opt->bvh_file, mesh);
+    const ChildOrder order = opt->order == "distance" ? ChildOrder::distance : ChildOrder::split_axis;
+
+    RaySet set;
+    if (!opt->load_rays.empty()) {
+      set = read_ray_file(opt->load_rays);
+    } else {
+      RaySetConfig cfg;
+      cfg.kind = *parse_ray_kind(opt->rays);
+      cfg.seed = opt->seed;
+      cfg.count = opt->count;
+      cfg.width = opt->width;
+      cfg.height = opt->height;
+      set = make_ray_set(mesh, *tree.tracer, cfg);
+    }
+    if (!opt->save_rays.empty()) write_ray_file(opt->save_rays, set);
+    if (set.rays.empty()) throw Error("trace: the ray set is empty");
+
+    MeasureOptions one;
+    one.order = order;
+    one.threads = 1;
+    one.repeats = opt->repeats;
+    const RayMeasurement m1 = measure_rays(*tree.tracer, set.rays, set.query, one);
+    MeasureOptions all = one;
+    all.threads = opt->threads.effective();
+    const RayMeasurement mn = measure_rays(*tree.tracer, set.rays, set.query, all);
+    std::optional<BruteForceCheck> check;
+    if (opt->check > 0)
+      check = check_against_brute_force(*tree.tracer, mesh, set.rays, set.query, opt->check, opt->seed, order);
+
+    if (opt->json) {
+      nlohmann::json j = {{"bvh", opt->bvh_file},
+                          {"scene", mesh.name},
+                          {"triangles", mesh.triangle_count()},
+                          {"method", tree.info.method},
+                          {"rays", std::string(ray_kind_name(set.kind))},
+                          {"query", set.query == RayQuery::any ? "any" : "closest"},
+                          {"count", set.rays.size()},
+                          {"seed", set.seed},
+                          {"order", opt->order},
+                          {"hit_rate", m1.hit_rate},
+                          {"threads_1", {{"seconds", m1.seconds}, {"rays_per_second", m1.rays_per_second}}},
+                          {"threads_n", {{"threads", mn.threads}, {"seconds", mn.seconds},
+                                         {"rays_per_second", mn.rays_per_second}}},
+                          {"steps", distribution_json(m1.steps)},
+                          {"triangle_tests", distribution_json(m1.triangle_tests)}};
+      if (check) j["brute_force"] = {{"checked", check->checked}, {"mismatches", check->mismatches},
+                                     {"first_mismatch", check->first_mismatch}};
+      print_json(j);
+    } else {
+      std::cout << "tree       " << opt->bvh_file << " (" << tree.info.method << ")\n"
+                << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles)\n"
+                << "rays       " << set.rays.size() << " " << ray_kind_name(set.kind)
+                << (set.query == RayQuery::any ? " (any hit)" : " (closest hit)") << ", seed " << set.seed << "\n"
+                << "hit rate   " << format_double(100.0 * m1.hit_rate, 2) << " %\n"
+                << "speed      " << format_double(m1.rays_per_second / 1e6, 3) << " Mrays/s on 1 thread, "
+                << format_double(mn.rays_per_second / 1e6, 3) << " on " << mn.threads << " (x"
+                << format_double(mn.rays_per_second / m1.rays_per_second, 2) << "), order " << opt->order << "\n"
+                << "steps/ray  mean " << format_double(m1.steps.mean, 2) << ", p50 " << m1.steps.p50 << ", p90 "
+                << m1.steps.p90 << ", p99 " << m1.steps.p99 << ", max " << m1.steps.max << "\n"
+                << "           " << histogram_line(m1.steps) << "\n"
+                << "tests/ray  mean " << format_double(m1.triangle_tests.mean, 2) << ", p50 "
+                << m1.triangle_tests.p50 << ", p90 " << m1.triangle_tests.p90 << ", p99 " << m1.triangle_tests.p99
+                << ", max " << m1.triangle_tests.max << "\n";
+      if (check)
+        std::cout << "check      " << check->checked << " rays against brute force: "
+                  << (check->mismatches == 0 ? std::string("all agree")
+                                             : std::to_string(check->mismatches) + " differ; " + check->first_mismatch)
+                  << "\n";
+    }
+    if (check && check->mismatches != 0)
+      throw Error(opt->bvh_file + ": traversal disagrees with brute force on " + std::to_string(check->mismatches) +
+                  " of " + std::to_string(check->checked) + " rays (" + check->first_mismatch + ")");
+  });
+}
+
+}  // namespace bvhopt::cli

@@ -1,0 +1,40 @@
+// Pictures of traversal: steps-per-pixel heat maps, an eye-light shaded image, and the
+// difference of two trees. PNG through stb_image_write.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <vector>
+
+#include "bvhopt/mesh.h"
+#include "bvhopt/ray.h"
+#include "bvhopt/traversal.h"
+
+namespace bvhopt {
+
+struct Image {
+  uint32_t width = 0, height = 0;
+  std::vector<uint8_t> rgb;  // 3 bytes per pixel, row-major from the top left
+};
+
+// The fixed heat scale of Bittner's Figure 1: 0 steps dark blue, through cyan, green and
+// yellow, to red at `max_steps` and beyond. Fixed so images of different trees compare.
+void heat_color(float steps, float max_steps, uint8_t rgb[3]);
+
+// One pixel per primary ray (counters.size() == width * height).
+Image heatmap_image(const std::vector<TraceCounters>& counters, uint32_t width, uint32_t height,
+                    float max_steps = 100.0f);
+
+// Eye light: grey level |cos| between the ray and the geometric normal of the hit; misses black.
+Image shaded_image(const Mesh& mesh, const std::vector<Ray>& rays, const std::vector<Hit>& hits, uint32_t width,
+                   uint32_t height);
+
+// Steps of tree B minus steps of tree A per pixel: blue where B takes fewer steps, red where
+// it takes more, white where equal; full colour at +-`range` steps.
+Image difference_image(const std::vector<TraceCounters>& a, const std::vector<TraceCounters>& b, uint32_t width,
+                       uint32_t height, float range = 50.0f);
+
+// Through a temporary file renamed into place; throws Error naming the file on failure.
+void write_png(const std::filesystem::path& path, const Image& image);
+
+}  // namespace bvhopt

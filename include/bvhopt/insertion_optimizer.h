@@ -1,0 +1,104 @@
+// Insertion-based optimization (Bittner, Hapala and Havran 2013): remove inefficient inner
+// nodes and reinsert their children where they cost least, found by an exact branch and
+// bound search over the whole tree.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string_view>
+
+#include "bvhopt/box.h"
+#include "bvhopt/bvh.h"
+#include "bvhopt/cost_model.h"
+#include "bvhopt/optimize_report.h"
+
+namespace bvhopt {
+
+// Which inner nodes a pass updates first (section 2.4 and the extended paper).
+enum class InsertionMeasure {
+  area,  // M_AREA(N) = SA(N): the paper's choice, and the default
+  sum,   // M_SUM(N) = SA(N) / ((SA(L) + SA(R)) / 2)
+  min,   // M_MIN(N) = SA(N) / min(SA(L), SA(R))
+  comb,  // M_COMB(N) = M_AREA * M_SUM * M_MIN
+};
+
+std::string_view measure_name(InsertionMeasure m);
+// "area", "sum", "min", "comb"; nullopt for anything else.
+std::optional<InsertionMeasure> parse_measure(std::string_view name);
+
+// How the passes are run.
+enum class InsertionForm {
+  // The paper's form: one candidate at a time, both children removed and reinserted at the
+  // best place in the tree as it then is. One thread. May raise the cost for a pass; the
+  // best tree seen is kept.
+  sequential,
+  // Beyond the paper (after Meister and Bittner 2018): each pass searches the best move of
+  // every candidate's children on all threads against the tree as it stands (exact: the
+  // search sees the tree as it would be after the removal), then applies them in candidate
+  // order, skipping a move that touches a node an earlier move of the pass changed and
+  // undoing one that raised the cost. Never raises the cost; the tree does not depend on the
+  // thread count.
+  parallel,
+  // The sequential form until it stops, then the parallel form from its best tree: the fast
+  // large gains of the first, then the monotone polish of the second. The default: it gave
+  // the lowest costs in less time than either alone (bench/insertion_bench).
+  hybrid,
+};
+
+std::string_view form_name(InsertionForm f);
+// "sequential", "parallel", "hybrid"; nullopt for anything else.
+std::optional<InsertionForm> parse_form(std::string_view name);
+
+struct InsertionConfig {
+  CostModel cost;  // only scales the reported cost: the search minimizes c_T * sum SA(inner)
+  // Fraction of the inner nodes updated per pass (the paper's k = 1 %); at least one node.
+  double batch = 0.01;
+  InsertionMeasure measure = InsertionMeasure::area;
+  // Passes without a lower cost before selection turns random (p_R), and before the
+  // optimizer stops (p_T); the paper's 5 and 10.
+  uint32_t random_after = 5;
+  uint32_t stop_after = 10;
+  // A pass counts as an improvement only when it lowers the best cost by more than this
+  // fraction; without it the parallel form, which only ever lowers the cost, would count
+  // endless tiny gains and never turn random or stop.
+  double min_improvement = 1e-5;
+  // Hard limits over all stages; they also bound the run when the cost oscillates. The
+  // time limit is checked after every pass; 0 = none.
+  uint32_t max_passes = 1000;
+  double time_limit_seconds = 0.0;
+  // Every random choice (random selection passes) flows from this.
+  uint64_t seed = 1;
+  InsertionForm form = InsertionForm::hybrid;
+  // Test hook: called after every complete move (both children reinserted, or the move
+  // undone) with the tree and the tracked cost. Slows the optimizer down; leave empty.
+  std::function<void(const Bvh&, double tracked_cost)> after_move;
+};
+
+// Optimizes `bvh` in place. Works on a tree from any builder and with any leaf sizes: leaves
+// move as whole subtrees and are never split, so the leaf term of the cost stays fixed (the
+// references are not needed: leaf boxes are kept, inner boxes refitted from them). The tree
+// is compacted (depth-first numbering) before and after.
+OptimizeReport optimize_insertion(Bvh& bvh, const InsertionConfig& config = {}, const PassCallback& on_pass = {});
+
+// The best place for a subtree with box `box` (Algorithm 1): the node X minimizing
+// SA(X u box) plus the growth of every box above X, with that total (surface area, not
+// normalized). `skip` (and its subtree) and `pass_through` (itself only) are never chosen;
+// kInvalidNode for none. node = kInvalidNode when the tree offers no place.
+struct ReinsertionCandidate {
+  uint32_t node = kInvalidNode;
+  double cost = 0.0;
+};
+ReinsertionCandidate find_reinsertion(const Bvh& bvh, const Box& box, uint32_t skip = kInvalidNode,
+                                      uint32_t pass_through = kInvalidNode);
+// The same search in the tree as it would be after removing the inner non-root node `n` and
+// its parent (Figure 3: the parent's other child takes the parent's place, the boxes above
+// shrink), without changing the tree. `freed_area`, if given, receives the surface area the
+// removal frees. Equals find_reinsertion on the tree after an actual removal.
+ReinsertionCandidate find_reinsertion_after_removal(const Bvh& bvh, const Box& box, uint32_t n,
+                                                    double* freed_area = nullptr);
+// The same by trying every node, for tests: the same minimum, computed the same way.
+ReinsertionCandidate find_reinsertion_brute_force(const Bvh& bvh, const Box& box, uint32_t skip = kInvalidNode,
+                                                  uint32_t pass_through = kInvalidNode);
+
+}  // namespace bvhopt

@@ -1,0 +1,95 @@
+// Ray sets for measuring trees: generated deterministically from a seed, saved to and
+// loaded from the binary ray file (docs/ray-file-format.md) so any tracer traces the
+// very same rays.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "bvhopt/mesh.h"
+#include "bvhopt/ray.h"
+#include "bvhopt/traversal.h"
+
+namespace bvhopt {
+
+enum class RayKind : uint32_t {
+  primary = 0,  // pinhole camera, one ray per pixel centre, row-major from the top left
+  random = 1,   // Bittner: segments between two uniform points of the scene box
+  ao = 2,       // ambient occlusion: cosine-distributed rays about the normal at primary hits
+  path = 3,     // Kensler: two-bounce diffuse path tracing (primary, first and second bounce)
+  shadow = 4,   // from primary hits to a point light, any-hit
+};
+
+// "primary", "random", "ao", "path", "shadow".
+std::string_view ray_kind_name(RayKind kind);
+std::optional<RayKind> parse_ray_kind(std::string_view name);
+std::vector<RayKind> all_ray_kinds();
+
+struct Camera {
+  Vec3 position;
+  Vec3 target{0.0f, 0.0f, -1.0f};
+  Vec3 up{0.0f, 1.0f, 0.0f};
+  float fov_degrees = 60.0f;  // vertical field of view
+  uint32_t width = 1024;
+  uint32_t height = 768;
+};
+
+// The default view of a scene, from its bounding box and a few probe rays.
+// Up is +y (the convention of the shared scenes' formats) unless `up_axis` says otherwise.
+// Interior: probe rays from the box centre along the six axis directions and the eight
+// diagonals; when at least 12 of the 14 hit geometry the centre is enclosed, and the camera
+// stands there looking along the longer horizontal axis of the box (toward +).
+// Exterior: the camera looks at the box centre along the shorter horizontal axis (so the
+// wide side fills the image), from outside at the distance where the bounding sphere fits
+// the vertical field of view, raised by a quarter of the sphere radius.
+Camera default_camera(const Mesh& mesh, const Tracer& tracer, uint32_t width = 1024, uint32_t height = 768,
+                      int up_axis = 1);
+
+// One primary ray per pixel centre, row-major from the top-left pixel; directions unit length.
+std::vector<Ray> camera_rays(const Camera& camera);
+
+struct RaySetConfig {
+  RayKind kind = RayKind::primary;
+  uint64_t seed = 1;
+  // Rays wanted. 0: the camera's width * height for primary rays, 1,000,000 otherwise.
+  // primary: the resolution is set to about this many pixels at the camera's aspect ratio.
+  // ao, shadow, path: the camera resolution grows until the hits give at least this many
+  // rays, and the set is cut to exactly `count`, in pixel order.
+  uint64_t count = 0;
+  std::optional<Camera> camera;   // default: default_camera(..., width, height)
+  uint32_t width = 1024;
+  uint32_t height = 768;
+  int up_axis = 1;                // for the default camera and the default light
+  uint32_t ao_rays_per_hit = 10;  // N in Bittner's paper
+  float ao_length_fraction = 0.1f;  // AO ray length as a fraction of the scene box diagonal
+  // Point light of the shadow rays. Default: above the box centre, 40% of the box height up.
+  std::optional<Vec3> light;
+};
+
+struct RaySet {
+  RayKind kind = RayKind::primary;
+  RayQuery query = RayQuery::closest;  // shadow rays: any; all others: closest
+  uint64_t seed = 0;
+  uint32_t width = 0, height = 0;      // primary rays: the image they make; others 0
+  std::vector<Ray> rays;
+};
+
+// Deterministic in the mesh and config only (the same rays on any thread count). The
+// tracer is used to find the hits that ao, shadow and path rays start from.
+RaySet make_ray_set(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& config);
+
+// The ray file (docs/ray-file-format.md). write_ray_file writes a temporary file beside
+// `path` and renames it into place; on failure the temporary is removed and Error thrown.
+void write_ray_file(const std::filesystem::path& path, const RaySet& set);
+// Throws Error naming the file and the problem: missing, too short, wrong magic, newer
+// version, unknown kind or query, truncated or trailing bytes, checksum mismatch, or a
+// ray that cannot be traced (non-finite numbers, zero direction, tmin > tmax).
+RaySet read_ray_file(const std::filesystem::path& path);
+
+inline constexpr uint32_t kRayFileVersion = 1;
+
+}  // namespace bvhopt

@@ -1,0 +1,84 @@
+#include "bvhopt/compaction.h"
+
+#include <algorithm>
+#include <vector>
+
+#include "bvhopt/cost.h"
+
+namespace bvhopt {
+
+CompactionResult compact_leaves(Bvh& bvh, const CompactionConfig& config) {
+  CompactionResult result;
+  if (bvh.empty()) return result;
+  const CostModel& m = config.cost;
+  result.cost_before = sah_cost(bvh, m);
+
+  // The same recurrence, in the same order of operations, as optimal_collapse_cost, so the
+  // compacted tree's cost equals the `ocost` computed on the tree before.
+  const std::vector<uint32_t> post = bvh.post_order();
+  std::vector<double> best(bvh.nodes.size(), 0.0);
+  std::vector<uint64_t> count(bvh.nodes.size(), 0);
+  std::vector<char> collapse(bvh.nodes.size(), 0);
+  for (uint32_t n : post) {
+    const BvhNode& nd = bvh[n];
+    result.nodes_before++;
+    if (nd.is_leaf()) {
+      result.leaves_before++;
+      count[n] = nd.ref_count();
+      best[n] = leaf_cost(nd.area, nd.ref_count(), m);
+      continue;
+    }
+    count[n] = count[nd.left()] + count[nd.right()];
+    const double as_tree = m.traversal * nd.area + best[nd.left()] + best[nd.right()];
+    const bool may_collapse = config.max_leaf_size == 0 || count[n] <= config.max_leaf_size;
+    const double as_leaf = m.intersection * nd.area * static_cast<double>(count[n]);
+    collapse[n] = may_collapse && as_leaf <= as_tree;
+    best[n] = collapse[n] ? as_leaf : as_tree;
+  }
+
+  // Top-down: the first collapsible node on each path becomes a leaf holding, in
+  // depth-first order, the references of every leaf below it.
+  std::vector<uint32_t> new_refs;
+  new_refs.reserve(bvh.ref_indices.size());
+  std::vector<uint32_t> stack{bvh.root}, inner;
+  while (!stack.empty()) {
+    const uint32_t n = stack.back();
+    stack.pop_back();
+    BvhNode& nd = bvh[n];
+    if (nd.is_leaf()) {
+      const uint32_t first = static_cast<uint32_t>(new_refs.size());
+      for (uint32_t k = 0; k < nd.ref_count(); ++k) new_refs.push_back(bvh.ref_indices[nd.first_ref() + k]);
+      nd.make_leaf(first, nd.ref_count());
+      continue;
+    }
+    if (collapse[n]) {
+      const uint32_t first = static_cast<uint32_t>(new_refs.size());
+      inner.assign(1, n);
+      while (!inner.empty()) {
+        const uint32_t c = inner.back();
+        inner.pop_back();
+        const BvhNode& cd = bvh[c];
+        if (cd.is_leaf()) {
+          for (uint32_t k = 0; k < cd.ref_count(); ++k) new_refs.push_back(bvh.ref_indices[cd.first_ref() + k]);
+        } else {
+          inner.push_back(cd.right());
+          inner.push_back(cd.left());
+        }
+      }
+      // The box stays: it already is the union of everything below.
+      nd.make_leaf(first, static_cast<uint32_t>(new_refs.size()) - first);
+      continue;
+    }
+    stack.push_back(nd.right());
+    stack.push_back(nd.left());
+  }
+  bvh.ref_indices = std::move(new_refs);
+  bvh.compact();
+
+  for (const BvhNode& nd : bvh.nodes) result.leaves_after += nd.is_leaf();
+  result.nodes_after = bvh.nodes.size();
+  result.cost_after = sah_cost(bvh, m);
+  return result;
+}
+
+}  // namespace bvhopt

@@ -1,0 +1,143 @@
+// Algorithm 1 of Bittner et al. 2013 (best-first branch and bound), shared by the optimizer
+// and the public find_reinsertion.
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "bvhopt/bvh.h"
+#include "bvhopt/insertion_optimizer.h"
+
+namespace bvhopt::detail {
+
+struct SearchEntry {
+  double induced;  // C_I: growth of every box above the node
+  uint32_t node;
+};
+
+// A min-heap on the induced cost; `heap` is scratch space reused between searches so a hot
+// loop allocates nothing.
+inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, uint32_t skip, uint32_t pass_through,
+                                               std::vector<SearchEntry>& heap) {
+  ReinsertionCandidate best{kInvalidNode, std::numeric_limits<double>::infinity()};
+  if (bvh.empty()) return best;
+  const double l_area = box.area();
+  const BvhNode* nodes = bvh.nodes.data();
+  auto later = [](const SearchEntry& a, const SearchEntry& b) { return a.induced > b.induced; };
+  heap.clear();
+  // The root is the only node evaluated on its own; every other node is evaluated when its
+  // parent is expanded, so a good C_best is known before anything is queued and leaves
+  // never enter the queue.
+  {
+    const BvhNode& r = nodes[bvh.root];
+    if (bvh.root != skip) {
+      const double direct = merge(r.box, box).area();
+      if (bvh.root != pass_through) best = {bvh.root, direct};
+      if (!r.is_leaf()) heap.push_back({direct - static_cast<double>(r.area), bvh.root});
+    }
+  }
+  while (!heap.empty()) {
+    std::pop_heap(heap.begin(), heap.end(), later);
+    const SearchEntry e = heap.back();
+    heap.pop_back();
+    // Here `induced` is the induced cost of e.node's children. Every node left in the queue
+    // costs at least its induced cost plus SA(L): none can win.
+    if (e.induced + l_area >= best.cost) break;
+    const BvhNode& x = nodes[e.node];
+    for (int side = 0; side < 2; ++side) {
+      const uint32_t c = x.child(side);
+      if (c == skip) continue;
+      const BvhNode& cn = nodes[c];
+      const double direct = merge(cn.box, box).area();
+      const double total = e.induced + direct;
+      if (total < best.cost && c != pass_through) best = {c, total};
+      if (cn.is_leaf()) continue;
+      // Written as induced + growth (never (induced + direct) - area): a sum of non-negative
+      // terms rounds monotonically, so the bound never exceeds a true cost in the subtree
+      // and the search stays exact to the last bit.
+      const double child_induced = e.induced + (direct - static_cast<double>(cn.area));
+      if (child_induced + l_area < best.cost) {
+        heap.push_back({child_induced, c});
+        std::push_heap(heap.begin(), heap.end(), later);
+      }
+    }
+  }
+  return best;
+}
+
+// The same search in the tree as it would be after Figure 3's removal of `n` and its parent
+// P (P's other child S in P's place, the boxes above shrunk), without changing the tree:
+// the path from the root down to P's parent is walked first with the shrunk boxes, and the
+// subtrees hanging off it (none of which contains n) are searched as usual. `gain` receives
+// the area the removal frees. Exact: it equals find_reinsertion on the removed tree.
+inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, const Box& box, uint32_t n,
+                                                             std::vector<SearchEntry>& heap,
+                                                             std::vector<std::pair<uint32_t, Box>>& path,
+                                                             double* gain) {
+  ReinsertionCandidate best{kInvalidNode, std::numeric_limits<double>::infinity()};
+  const BvhNode* nodes = bvh.nodes.data();
+  const uint32_t p = nodes[n].parent;
+  const uint32_t s = nodes[p].left() == n ? nodes[p].right() : nodes[p].left();
+  const double l_area = box.area();
+  auto later = [](const SearchEntry& a, const SearchEntry& b) { return a.induced > b.induced; };
+  heap.clear();
+  path.clear();
+  // Shrunk boxes bottom-up: each ancestor of P without n's subtree.
+  double freed = static_cast<double>(nodes[n].area) + nodes[p].area;
+  Box below = nodes[s].box;
+  uint32_t from = p;
+  for (uint32_t a = nodes[p].parent; a != kInvalidNode; a = nodes[a].parent) {
+    const uint32_t other = nodes[a].left() == from ? nodes[a].right() : nodes[a].left();
+    below = merge(below, nodes[other].box);
+    path.push_back({a, below});
+    freed += static_cast<double>(nodes[a].area) - below.area();
+    from = a;
+  }
+  if (gain) *gain = freed;
+
+  auto consider = [&](uint32_t c, double induced) {
+    const BvhNode& cn = nodes[c];
+    const double direct = merge(cn.box, box).area();
+    const double total = induced + direct;
+    if (total < best.cost) best = {c, total};
+    if (cn.is_leaf()) return;
+    const double child_induced = induced + (direct - static_cast<double>(cn.area));
+    if (child_induced + l_area < best.cost) {
+      heap.push_back({child_induced, c});
+      std::push_heap(heap.begin(), heap.end(), later);
+    }
+  };
+  // Top-down along the path; `path` is bottom-up.
+  double induced = 0.0;
+  for (size_t i = path.size(); i-- > 0;) {
+    const uint32_t a = path[i].first;
+    const Box& shrunk = path[i].second;
+    const double shrunk_area = shrunk.area();
+    const double direct = merge(shrunk, box).area();
+    const double total = induced + direct;
+    if (total < best.cost) best = {a, total};
+    const double child_induced = induced + (direct - shrunk_area);
+    const uint32_t on_path = i > 0 ? path[i - 1].first : p;
+    const uint32_t off_path = nodes[a].left() == on_path ? nodes[a].right() : nodes[a].left();
+    // The path is short; an off-path subtree whose bound already loses is never opened.
+    if (child_induced + l_area < best.cost) consider(off_path, child_induced);
+    induced = child_induced;
+  }
+  // S in P's place, with the induced cost of P's position.
+  if (induced + l_area < best.cost || best.node == kInvalidNode) consider(s, induced);
+
+  while (!heap.empty()) {
+    std::pop_heap(heap.begin(), heap.end(), later);
+    const SearchEntry e = heap.back();
+    heap.pop_back();
+    if (e.induced + l_area >= best.cost) break;
+    const BvhNode& x = nodes[e.node];
+    consider(x.left(), e.induced);
+    consider(x.right(), e.induced);
+  }
+  return best;
+}
+
+}  // namespace bvhopt::detail

@@ -1,0 +1,102 @@
+// Heat maps and shaded images, written as PNG by stb_image_write (implementation in libstb).
+#include "bvhopt/images.h"
+
+#include <stb/stb_image_write.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <system_error>
+
+#include "bvhopt/error.h"
+
+namespace bvhopt {
+namespace {
+
+uint8_t to_byte(float x) { return static_cast<uint8_t>(std::lround(std::clamp(x, 0.0f, 1.0f) * 255.0f)); }
+
+void check_size(size_t n, uint32_t w, uint32_t h, const char* what) {
+  if (n != size_t(w) * h)
+    throw Error(std::string(what) + ": " + std::to_string(n) + " values for a " + std::to_string(w) + "x" +
+                std::to_string(h) + " image");
+}
+
+}  // namespace
+
+void heat_color(float steps, float max_steps, uint8_t rgb[3]) {
+  // Piecewise linear through dark blue, blue, cyan, green, yellow, red.
+  static constexpr float stops[6][3] = {{0.0f, 0.0f, 0.35f}, {0.0f, 0.2f, 1.0f}, {0.0f, 0.9f, 1.0f},
+                                        {0.1f, 0.9f, 0.1f},  {1.0f, 0.95f, 0.0f}, {0.9f, 0.0f, 0.0f}};
+  const float x = std::clamp(max_steps > 0.0f ? steps / max_steps : 1.0f, 0.0f, 1.0f) * 5.0f;
+  const int i = std::min(static_cast<int>(x), 4);
+  const float f = x - float(i);
+  for (int c = 0; c < 3; ++c) rgb[c] = to_byte(stops[i][c] * (1.0f - f) + stops[i + 1][c] * f);
+}
+
+Image heatmap_image(const std::vector<TraceCounters>& counters, uint32_t width, uint32_t height, float max_steps) {
+  check_size(counters.size(), width, height, "heat map");
+  Image img{width, height, std::vector<uint8_t>(size_t(width) * height * 3)};
+  for (size_t i = 0; i < counters.size(); ++i) heat_color(float(counters[i].steps), max_steps, &img.rgb[3 * i]);
+  return img;
+}
+
+Image shaded_image(const Mesh& mesh, const std::vector<Ray>& rays, const std::vector<Hit>& hits, uint32_t width,
+                   uint32_t height) {
+  check_size(rays.size(), width, height, "shaded image");
+  check_size(hits.size(), width, height, "shaded image");
+  Image img{width, height, std::vector<uint8_t>(size_t(width) * height * 3, 0)};
+  for (size_t i = 0; i < hits.size(); ++i) {
+    if (!hits[i].hit()) continue;
+    const Triangle t = mesh.triangle(hits[i].triangle_id);
+    const Vec3 n = cross(t.v1 - t.v0, t.v2 - t.v0);
+    const float denom = length(n) * length(rays[i].dir);
+    const float c = denom > 0.0f ? std::fabs(dot(n, rays[i].dir)) / denom : 0.0f;
+    // A little ambient so surfaces seen edge-on stay visible against the black background.
+    const uint8_t g = to_byte(0.1f + 0.9f * c);
+    img.rgb[3 * i] = img.rgb[3 * i + 1] = img.rgb[3 * i + 2] = g;
+  }
+  return img;
+}
+
+Image difference_image(const std::vector<TraceCounters>& a, const std::vector<TraceCounters>& b, uint32_t width,
+                       uint32_t height, float range) {
+  check_size(a.size(), width, height, "difference image");
+  check_size(b.size(), width, height, "difference image");
+  Image img{width, height, std::vector<uint8_t>(size_t(width) * height * 3)};
+  for (size_t i = 0; i < a.size(); ++i) {
+    const float d = std::clamp((float(b[i].steps) - float(a[i].steps)) / std::max(range, 1e-6f), -1.0f, 1.0f);
+    const float keep = 1.0f - std::fabs(d);
+    uint8_t* p = &img.rgb[3 * i];
+    if (d >= 0.0f) {
+      p[0] = 255;
+      p[1] = p[2] = to_byte(keep);
+    } else {
+      p[2] = 255;
+      p[0] = p[1] = to_byte(keep);
+    }
+  }
+  return img;
+}
+
+void write_png(const std::filesystem::path& path, const Image& image) {
+  if (image.width == 0 || image.height == 0 || image.rgb.size() != size_t(image.width) * image.height * 3)
+    throw Error(path.string() + ": cannot write an empty or malformed image");
+  const std::filesystem::path tmp = path.string() + ".tmp-" + std::to_string(::getpid()) + ".png";
+  const int ok = stbi_write_png(tmp.c_str(), int(image.width), int(image.height), 3, image.rgb.data(),
+                                int(image.width * 3));
+  if (!ok) {
+    std::error_code ec;
+    std::filesystem::remove(tmp, ec);
+    throw Error(path.string() + ": PNG write failed (no permission, missing folder or disk full?)");
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::error_code ignore;
+    std::filesystem::remove(tmp, ignore);
+    throw Error(path.string() + ": cannot rename temporary file into place: " + ec.message());
+  }
+}
+
+}  // namespace bvhopt

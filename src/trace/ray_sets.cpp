@@ -1,0 +1,435 @@
+// Ray set generation and the ray file.
+#include "bvhopt/ray_sets.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <numbers>
+#include <string>
+#include <system_error>
+
+#include "bvhopt/error.h"
+
+namespace bvhopt {
+namespace {
+
+static_assert(std::endian::native == std::endian::little, "ray files are little-endian; add byte swapping");
+
+// splitmix64: one independent stream per (seed, pixel), so generation in parallel blocks
+// gives the same rays as a serial loop.
+struct Rng {
+  uint64_t state;
+  Rng(uint64_t seed, uint64_t stream) : state(seed * 0x9E3779B97F4A7C15ull ^ (stream + 0x632BE59BD9B4E019ull)) {
+    next();
+    next();
+  }
+  uint64_t next() {
+    uint64_t z = (state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+  float uniform() { return static_cast<float>(next() >> 40) * 0x1p-24f; }  // [0, 1)
+};
+
+Box mesh_bounds(const Mesh& mesh) {
+  Box b;
+  for (size_t v = 0; v < mesh.vertex_count(); ++v) b.extend(mesh.vertex(v));
+  return b;
+}
+
+Vec3 axis_vector(int axis, float s = 1.0f) {
+  Vec3 v(0.0f);
+  v[axis] = s;
+  return v;
+}
+
+// Unit geometric normal of the hit triangle, turned toward the side the ray came from.
+// Returns false for triangles too thin to have a usable normal.
+bool facing_normal(const Triangle& tri, const Vec3& dir, Vec3& n) {
+  const Vec3 c = cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
+  const float len = length(c);
+  if (!(len > 0.0f) || !std::isfinite(len)) return false;
+  n = c / len;
+  if (dot(n, dir) > 0.0f) n = -n;
+  return true;
+}
+
+Vec3 hit_point(const Triangle& tri, const Hit& h) {
+  return tri.v0 * (1.0f - h.u - h.v) + tri.v1 * h.u + tri.v2 * h.v;
+}
+
+// Cosine-weighted direction about unit n.
+Vec3 cosine_direction(const Vec3& n, Rng& rng) {
+  const Vec3 helper = std::fabs(n.x) > 0.5f ? Vec3(0.0f, 1.0f, 0.0f) : Vec3(1.0f, 0.0f, 0.0f);
+  const Vec3 t = normalize(cross(helper, n));
+  const Vec3 b = cross(n, t);
+  const float r1 = rng.uniform(), r2 = rng.uniform();
+  const float phi = 2.0f * std::numbers::pi_v<float> * r1;
+  const float r = std::sqrt(r2);
+  const float z = std::sqrt(std::max(0.0f, 1.0f - r2));
+  return normalize(t * (r * std::cos(phi)) + b * (r * std::sin(phi)) + n * z);
+}
+
+// Rays started at the primary hits of a camera: up to `per_pixel` per pixel, made by
+// `emit(pixel, hit, tri, normal, rng, out)`, gathered in pixel order.
+template <class Emit>
+std::vector<Ray> from_primary_hits(const Mesh& mesh, const Tracer& tracer, const Camera& camera, uint64_t seed,
+                                   uint32_t per_pixel, Emit emit) {
+  const std::vector<Ray> primary = camera_rays(camera);
+  const size_t pixels = primary.size();
+  std::vector<Ray> slots(pixels * per_pixel);
+  std::vector<uint32_t> used(pixels, 0);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, 256), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t p = r.begin(); p < r.end(); ++p) {
+      TraceCounters c;
+      const Hit h = tracer.closest(primary[p], c);
+      if (!h.hit()) continue;
+      const Triangle tri = mesh.triangle(h.triangle_id);
+      Vec3 n;
+      if (!facing_normal(tri, primary[p].dir, n)) continue;
+      Rng rng(seed, p);
+      used[p] = emit(primary[p], h, tri, n, rng, &slots[p * per_pixel]);
+    }
+  });
+  std::vector<Ray> out;
+  for (size_t p = 0; p < pixels; ++p)
+    out.insert(out.end(), slots.begin() + p * per_pixel, slots.begin() + p * per_pixel + used[p]);
+  return out;
+}
+
+Camera with_pixels(Camera cam, double pixels) {
+  const double aspect = double(cam.width) / double(std::max<uint32_t>(cam.height, 1));
+  const double h = std::max(1.0, std::round(std::sqrt(pixels / aspect)));
+  const double w = std::max(1.0, std::round(pixels / h));
+  cam.width = static_cast<uint32_t>(std::min(w, 1e5));
+  cam.height = static_cast<uint32_t>(std::min(h, 1e5));
+  return cam;
+}
+
+uint64_t fnv1a(uint64_t h, const void* data, size_t n) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (size_t i = 0; i < n; ++i) {
+    h ^= p[i];
+    h *= 0x100000001B3ull;
+  }
+  return h;
+}
+
+constexpr char kMagic[8] = {'B', 'V', 'H', 'O', 'R', 'A', 'Y', 'S'};
+constexpr size_t kHeaderSize = 64;
+constexpr uint64_t kFnvBasis = 0xCBF29CE484222325ull;
+
+struct Header {
+  char magic[8];
+  uint32_t version;
+  uint32_t kind;
+  uint32_t query;
+  uint32_t width;
+  uint32_t height;
+  uint32_t reserved0;
+  uint64_t seed;
+  uint64_t count;
+  uint64_t checksum;  // FNV-1a 64 over bytes 0..47 of the header, then the payload
+  uint64_t reserved1;
+};
+static_assert(sizeof(Header) == kHeaderSize);
+
+uint64_t checksum_of(const Header& h, const std::vector<Ray>& rays) {
+  uint64_t c = fnv1a(kFnvBasis, &h, 48);
+  return fnv1a(c, rays.data(), rays.size() * sizeof(Ray));
+}
+
+}  // namespace
+
+std::string_view ray_kind_name(RayKind kind) {
+  switch (kind) {
+    case RayKind::primary: return "primary";
+    case RayKind::random: return "random";
+    case RayKind::ao: return "ao";
+    case RayKind::path: return "path";
+    case RayKind::shadow: return "shadow";
+  }
+  return "unknown";
+}
+
+std::optional<RayKind> parse_ray_kind(std::string_view name) {
+  for (RayKind k : all_ray_kinds())
+    if (ray_kind_name(k) == name) return k;
+  return std::nullopt;
+}
+
+std::vector<RayKind> all_ray_kinds() {
+  return {RayKind::primary, RayKind::random, RayKind::ao, RayKind::path, RayKind::shadow};
+}
+
+Camera default_camera(const Mesh& mesh, const Tracer& tracer, uint32_t width, uint32_t height, int up_axis) {
+  if (up_axis < 0 || up_axis > 2) throw Error("default camera: up axis " + std::to_string(up_axis) + " is not 0, 1 or 2");
+  const Box box = mesh_bounds(mesh);
+  const Vec3 centre = box.center();
+  const Vec3 ext = box.extent();
+  const int h0 = up_axis == 0 ? 1 : 0;
+  const int h1 = up_axis == 2 ? 1 : 2;
+  const int long_axis = ext[h0] >= ext[h1] ? h0 : h1;
+  const int short_axis = long_axis == h0 ? h1 : h0;
+
+  int hits = 0;
+  TraceCounters counters;
+  for (int a = 0; a < 3; ++a)
+    for (float s : {-1.0f, 1.0f}) {
+      Ray r;
+      r.org = centre;
+      r.dir = axis_vector(a, s);
+      hits += tracer.any(r, counters) ? 1 : 0;
+    }
+  for (int i = 0; i < 8; ++i) {
+    Ray r;
+    r.org = centre;
+    r.dir = Vec3((i & 1) ? ext.x : -ext.x, (i & 2) ? ext.y : -ext.y, (i & 4) ? ext.z : -ext.z);
+    if (r.dir == Vec3(0.0f)) continue;
+    hits += tracer.any(r, counters) ? 1 : 0;
+  }
+
+  Camera cam;
+  cam.width = width;
+  cam.height = height;
+  cam.up = axis_vector(up_axis);
+  if (hits >= 12) {
+    cam.position = centre;
+    cam.target = centre + axis_vector(long_axis, std::max(ext[long_axis], 1e-6f));
+    return cam;
+  }
+  const float radius = std::max(0.5f * length(ext), 1e-6f);
+  const float half_fov = 0.5f * cam.fov_degrees * std::numbers::pi_v<float> / 180.0f;
+  const float distance = radius / std::sin(half_fov);
+  cam.target = centre;
+  cam.position = centre + axis_vector(short_axis, distance) + cam.up * (0.25f * radius);
+  return cam;
+}
+
+std::vector<Ray> camera_rays(const Camera& cam) {
+  const Vec3 forward_raw = cam.target - cam.position;
+  if (!(length(forward_raw) > 0.0f) || !is_finite(forward_raw))
+    throw Error("camera: position and target must differ and be finite");
+  const Vec3 forward = normalize(forward_raw);
+  Vec3 right = cross(forward, cam.up);
+  if (!(length(right) > 1e-6f)) {
+    // Looking straight along `up`: any perpendicular will do.
+    right = cross(forward, std::fabs(forward.x) < 0.9f ? Vec3(1, 0, 0) : Vec3(0, 1, 0));
+  }
+  right = normalize(right);
+  const Vec3 up = cross(right, forward);
+  if (cam.width == 0 || cam.height == 0) throw Error("camera: resolution must be at least 1x1");
+  if (!(cam.fov_degrees > 0.0f && cam.fov_degrees < 180.0f))
+    throw Error("camera: field of view " + std::to_string(cam.fov_degrees) + " not in (0, 180) degrees");
+  const float tan_half = std::tan(0.5f * cam.fov_degrees * std::numbers::pi_v<float> / 180.0f);
+  const float aspect = float(cam.width) / float(cam.height);
+  std::vector<Ray> rays(size_t(cam.width) * cam.height);
+  for (uint32_t y = 0; y < cam.height; ++y)
+    for (uint32_t x = 0; x < cam.width; ++x) {
+      const float sx = (2.0f * (x + 0.5f) / cam.width - 1.0f) * tan_half * aspect;
+      const float sy = (1.0f - 2.0f * (y + 0.5f) / cam.height) * tan_half;
+      Ray& r = rays[size_t(y) * cam.width + x];
+      r.org = cam.position;
+      r.dir = normalize(forward + right * sx + up * sy);
+    }
+  return rays;
+}
+
+RaySet make_ray_set(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& config) {
+  RaySet set;
+  set.kind = config.kind;
+  set.seed = config.seed;
+  set.query = config.kind == RayKind::shadow ? RayQuery::any : RayQuery::closest;
+  const Box box = mesh_bounds(mesh);
+  const float diagonal = length(box.extent());
+  // Secondary rays start this far off the surface, along the normal, so they cannot hit
+  // the triangle they leave through rounding of the hit point.
+  const float offset = 1e-5f * std::max(diagonal, 1e-30f);
+  const Camera camera =
+      config.camera ? *config.camera : default_camera(mesh, tracer, config.width, config.height, config.up_axis);
+  const uint64_t count = config.count != 0 ? config.count
+                         : config.kind == RayKind::primary ? uint64_t(camera.width) * camera.height
+                                                           : 1'000'000;
+
+  if (config.kind == RayKind::primary) {
+    const Camera cam = config.count != 0 ? with_pixels(camera, double(count)) : camera;
+    set.width = cam.width;
+    set.height = cam.height;
+    set.rays = camera_rays(cam);
+    return set;
+  }
+  if (config.kind == RayKind::random) {
+    set.rays.resize(count);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 4096), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        Rng rng(config.seed, i);
+        Ray& ray = set.rays[i];
+        for (;;) {
+          const Vec3 a = box.min + box.extent() * Vec3(rng.uniform(), rng.uniform(), rng.uniform());
+          const Vec3 b = box.min + box.extent() * Vec3(rng.uniform(), rng.uniform(), rng.uniform());
+          if (a == b) continue;  // a zero direction cannot be traced
+          ray.org = a;
+          ray.dir = b - a;
+          ray.tmin = 0.0f;
+          ray.tmax = 1.0f;
+          break;
+        }
+      }
+    });
+    return set;
+  }
+
+  uint32_t per_pixel = 1;
+  if (config.kind == RayKind::ao) per_pixel = std::max<uint32_t>(config.ao_rays_per_hit, 1);
+  if (config.kind == RayKind::path) per_pixel = 3;
+  const float ao_length = config.ao_length_fraction * diagonal;
+  const Vec3 light = config.light ? *config.light
+                                  : box.center() + axis_vector(config.up_axis, 0.4f * box.extent()[config.up_axis]);
+
+  auto emit = [&](const Ray& primary, const Hit& h, const Triangle& tri, const Vec3& n, Rng& rng, Ray* out) -> uint32_t {
+    const Vec3 p = hit_point(tri, h) + n * offset;
+    if (config.kind == RayKind::ao) {
+      for (uint32_t i = 0; i < per_pixel; ++i) {
+        out[i].org = p;
+        out[i].dir = cosine_direction(n, rng);
+        out[i].tmin = 0.0f;
+        out[i].tmax = ao_length;
+      }
+      return per_pixel;
+    }
+    if (config.kind == RayKind::shadow) {
+      const Vec3 to_light = light - p;
+      if (!(dot(to_light, n) > 0.0f)) return 0;  // the light is behind the surface
+      out[0].org = p;
+      out[0].dir = to_light;
+      out[0].tmin = 0.0f;
+      out[0].tmax = 1.0f;
+      return 1;
+    }
+    // Path: the primary ray, then two diffuse bounces, each traced to find the next start.
+    out[0] = primary;
+    uint32_t n_out = 1;
+    Vec3 start = p, normal = n;
+    for (int bounce = 0; bounce < 2; ++bounce) {
+      Ray r;
+      r.org = start;
+      r.dir = cosine_direction(normal, rng);
+      out[n_out++] = r;
+      if (bounce == 1) break;
+      TraceCounters c;
+      const Hit next = tracer.closest(r, c);
+      if (!next.hit()) break;
+      const Triangle t2 = mesh.triangle(next.triangle_id);
+      if (!facing_normal(t2, r.dir, normal)) break;
+      start = hit_point(t2, next) + normal * offset;
+    }
+    return n_out;
+  };
+
+  // Grow the image until its hits give enough rays; the rays of one pixel stay together.
+  Camera cam = with_pixels(camera, std::max<double>(1.0, double(count) / per_pixel));
+  for (int attempt = 0;; ++attempt) {
+    set.rays = from_primary_hits(mesh, tracer, cam, config.seed, per_pixel, emit);
+    if (set.rays.size() >= count) break;
+    if (attempt == 6 || set.rays.empty()) {
+      if (set.rays.empty())
+        throw Error(mesh.name + ": no " + std::string(ray_kind_name(config.kind)) +
+                    " rays: the camera sees no geometry (set a camera position and target)");
+      break;  // a sparse view: take what there is
+    }
+    const double grow = std::min(16.0, 1.1 * double(count) / double(set.rays.size()));
+    cam = with_pixels(cam, double(cam.width) * cam.height * grow);
+  }
+  if (set.rays.size() > count) set.rays.resize(count);
+  return set;
+}
+
+void write_ray_file(const std::filesystem::path& path, const RaySet& set) {
+  Header h{};
+  std::memcpy(h.magic, kMagic, 8);
+  h.version = kRayFileVersion;
+  h.kind = static_cast<uint32_t>(set.kind);
+  h.query = static_cast<uint32_t>(set.query);
+  h.width = set.width;
+  h.height = set.height;
+  h.seed = set.seed;
+  h.count = set.rays.size();
+  h.checksum = checksum_of(h, set.rays);
+  const std::filesystem::path tmp = path.string() + ".tmp-" + std::to_string(::getpid());
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throw Error(path.string() + ": cannot create temporary file " + tmp.string());
+    out.write(reinterpret_cast<const char*>(&h), sizeof h);
+    out.write(reinterpret_cast<const char*>(set.rays.data()), std::streamsize(set.rays.size() * sizeof(Ray)));
+    out.flush();
+    if (!out) {
+      out.close();
+      std::error_code ec;
+      std::filesystem::remove(tmp, ec);
+      throw Error(path.string() + ": write failed (disk full or no permission?)");
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::error_code ignore;
+    std::filesystem::remove(tmp, ignore);
+    throw Error(path.string() + ": cannot rename temporary file into place: " + ec.message());
+  }
+}
+
+RaySet read_ray_file(const std::filesystem::path& path) {
+  const std::string name = path.string();
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(name + ": cannot open ray file (missing or unreadable)");
+  in.seekg(0, std::ios::end);
+  const uint64_t size = static_cast<uint64_t>(in.tellg());
+  in.seekg(0);
+  if (size < kHeaderSize)
+    throw Error(name + ": " + std::to_string(size) + " bytes, too short for the 64-byte ray file header");
+  Header h;
+  in.read(reinterpret_cast<char*>(&h), sizeof h);
+  if (std::memcmp(h.magic, kMagic, 8) != 0) throw Error(name + ": offset 0: not a bvhopt ray file (wrong magic)");
+  if (h.version == 0 || h.version > kRayFileVersion)
+    throw Error(name + ": offset 8: ray file version " + std::to_string(h.version) + ", this program reads up to " +
+                std::to_string(kRayFileVersion));
+  if (h.kind > static_cast<uint32_t>(RayKind::shadow))
+    throw Error(name + ": offset 12: unknown ray kind " + std::to_string(h.kind));
+  if (h.query > 1) throw Error(name + ": offset 16: unknown ray query " + std::to_string(h.query));
+  const uint64_t payload = size - kHeaderSize;
+  if (h.count > payload / sizeof(Ray) || payload != h.count * sizeof(Ray))
+    throw Error(name + ": header says " + std::to_string(h.count) + " rays (" + std::to_string(h.count * 32) +
+                " bytes after the header) but the file has " + std::to_string(payload) +
+                " (truncated or trailing bytes)");
+  RaySet set;
+  set.kind = static_cast<RayKind>(h.kind);
+  set.query = static_cast<RayQuery>(h.query);
+  set.width = h.width;
+  set.height = h.height;
+  set.seed = h.seed;
+  set.rays.resize(h.count);
+  in.read(reinterpret_cast<char*>(set.rays.data()), std::streamsize(h.count * sizeof(Ray)));
+  if (!in) throw Error(name + ": read failed in the ray records");
+  if (checksum_of(h, set.rays) != h.checksum) throw Error(name + ": checksum mismatch (the file is corrupt)");
+  if (set.kind == RayKind::primary && set.width != 0 && uint64_t(set.width) * set.height != h.count)
+    throw Error(name + ": offset 20: primary image " + std::to_string(set.width) + "x" + std::to_string(set.height) +
+                " does not match " + std::to_string(h.count) + " rays");
+  for (size_t i = 0; i < set.rays.size(); ++i) {
+    const Ray& r = set.rays[i];
+    const bool ok = is_finite(r.org) && is_finite(r.dir) && !(r.dir == Vec3(0.0f)) && std::isfinite(r.tmin) &&
+                    !std::isnan(r.tmax) && r.tmin <= r.tmax;
+    if (!ok)
+      throw Error(name + ": ray " + std::to_string(i) + " (offset " + std::to_string(kHeaderSize + 32 * i) +
+                  "): not traceable (non-finite value, zero direction or tmin > tmax)");
+  }
+  return set;
+}
+
+}  // namespace bvhopt

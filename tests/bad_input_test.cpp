@@ -1,0 +1,201 @@
+// Bad scene files, written at run time: each must give a bvhopt::Error that names the file
+// and says what is wrong, never a crash and never a mesh.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdint>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "bvhopt/error.h"
+#include "bvhopt/scene.h"
+#include "test_support.h"
+
+namespace bvhopt {
+namespace {
+
+namespace fs = std::filesystem;
+
+class BadInput : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("bvhopt_bad_input_" + std::to_string(::getpid()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+
+  fs::path write(const std::string& name, const std::string& bytes) {
+    fs::path p = dir_ / name;
+    std::ofstream(p, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    return p;
+  }
+
+  // Loading `path` must throw an Error whose message names the file and contains every
+  // one of `parts`.
+  void expect_rejected(const fs::path& path, const std::vector<std::string>& parts) {
+    SCOPED_TRACE(path.filename().string());
+    try {
+      Mesh m = load_mesh_file(path);
+      ADD_FAILURE() << "loaded " << m.triangle_count() << " triangles from a bad file";
+    } catch (const Error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(path.filename().string()), std::string::npos) << "file not named: " << msg;
+      for (const auto& p : parts) EXPECT_NE(msg.find(p), std::string::npos) << "'" << p << "' not in: " << msg;
+    }
+    // load_scene takes the same path and must fail the same way.
+    EXPECT_THROW(load_scene(path.string()), Error);
+  }
+
+  fs::path dir_;
+};
+
+const std::string kTriangleVertices = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+
+TEST_F(BadInput, MissingFile) { expect_rejected(dir_ / "nowhere.obj", {"no such file"}); }
+
+TEST_F(BadInput, Directory) {
+  fs::create_directories(dir_ / "folder.obj");
+  expect_rejected(dir_ / "folder.obj", {"directory"});
+}
+
+TEST_F(BadInput, UnknownExtension) {
+  expect_rejected(write("scene.xyzq", "hello, this is not a mesh\n"), {"unknown file format '.xyzq'"});
+}
+
+TEST_F(BadInput, EmptyFile) { expect_rejected(write("empty.obj", ""), {"empty file"}); }
+
+TEST_F(BadInput, ObjIndexOutOfRange) {
+  expect_rejected(write("range.obj", kTriangleVertices + "f 1 2 9\n"), {"index out of range"});
+  expect_rejected(write("negative.obj", kTriangleVertices + "f 1 2 -7\n"), {"index out of range"});
+  expect_rejected(write("zero.obj", kTriangleVertices + "f 0 1 2\n"), {"face index"});
+}
+
+TEST_F(BadInput, ObjNaNAndInfiniteCoordinates) {
+  expect_rejected(write("nan.obj", "v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n"), {"vertex", "coordinate y is NaN"});
+  expect_rejected(write("inf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n"), {"vertex", "coordinate z is infinite"});
+  // Too large for a float: overflows to infinity on reading.
+  expect_rejected(write("huge.obj", "v 1e39 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"), {"coordinate x is infinite"});
+}
+
+TEST_F(BadInput, ObjWithoutFaces) {
+  expect_rejected(write("points.obj", kTriangleVertices), {"no triangles"});
+  expect_rejected(write("lines.obj", kTriangleVertices + "l 1 2\nl 2 3\n"), {"no triangles"});
+}
+
+TEST_F(BadInput, GarbageNamedObj) {
+  std::mt19937_64 rng(5);
+  std::string bytes(4096, '\0');
+  for (auto& c : bytes) c = static_cast<char>(rng());
+  expect_rejected(write("garbage.obj", bytes), {});
+}
+
+TEST_F(BadInput, TruncatedBinaryPly) {
+  // A valid header promising 100 vertices and 50 triangles, and data that stops early.
+  std::string ply =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 100\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 50\nproperty list uchar int vertex_indices\nend_header\n";
+  for (int i = 0; i < 40 * 3; ++i) {
+    float f = static_cast<float>(i);
+    ply.append(reinterpret_cast<const char*>(&f), sizeof f);
+  }
+  expect_rejected(write("cut.ply", ply), {"truncated", "vertex 40 of 100"});
+}
+
+// A small PLY of `n` vertices on a circle and triangles fanned from vertex 0, as ASCII or
+// little-endian binary; `bad_index` replaces the last index of triangle 0.
+std::string small_ply(bool ascii, int n, int bad_index = -1) {
+  std::string s = std::string("ply\nformat ") + (ascii ? "ascii" : "binary_little_endian") +
+                  " 1.0\nelement vertex " + std::to_string(n) +
+                  "\nproperty float x\nproperty float y\nproperty float z\nelement face " + std::to_string(n - 2) +
+                  "\nproperty list uchar int vertex_indices\nend_header\n";
+  auto put = [&](auto value) {
+    if (ascii) s += std::to_string(value) + " ";
+    else s.append(reinterpret_cast<const char*>(&value), sizeof value);
+  };
+  for (int i = 0; i < n; ++i) {
+    put(std::cos(0.1f * i));
+    put(std::sin(0.1f * i));
+    put(0.0f);
+    if (ascii) s += "\n";
+  }
+  for (int t = 0; t < n - 2; ++t) {
+    if (ascii) s += "3 ";
+    else s.push_back(3);
+    put(int32_t{0});
+    put(int32_t(t + 1));
+    put(int32_t(t == 0 && bad_index >= 0 ? bad_index : t + 2));
+    if (ascii) s += "\n";
+  }
+  return s;
+}
+
+TEST_F(BadInput, SmallPlysLoad) {
+  // The control for the PLY cases below.
+  EXPECT_EQ(load_mesh_file(write("fan.ply", small_ply(true, 50))).triangle_count(), 48u);
+  EXPECT_EQ(load_mesh_file(write("fan_bin.ply", small_ply(false, 50))).triangle_count(), 48u);
+}
+
+TEST_F(BadInput, TruncatedAsciiPly) {
+  const std::string ply = small_ply(true, 50);
+  expect_rejected(write("cut_ascii.ply", ply.substr(0, ply.size() - 40)), {"truncated", "face"});
+  expect_rejected(write("cut_header.ply", ply.substr(0, 60)), {"end_header"});
+}
+
+TEST_F(BadInput, PlyIndexOutOfRange) {
+  expect_rejected(write("index_ascii.ply", small_ply(true, 50, 5000)),
+                  {"face 0: vertex index '5000' out of range (50 vertices)"});
+  expect_rejected(write("index_bin.ply", small_ply(false, 50, 5000)),
+                  {"face 0: vertex index 5000 out of range (50 vertices)"});
+}
+
+TEST_F(BadInput, CorruptedBinaryPlyNeverCrashes) {
+  // Random bytes overwritten all over a real scan: each copy either loads (the damage hit
+  // only coordinates) or is rejected with an Error, and the process survives.
+  const fs::path source = testing::scenes_dir() / "horse.ply";
+  if (!fs::exists(source)) GTEST_SKIP() << "no " << source;
+  std::ifstream in(source, std::ios::binary);
+  const std::string original((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  int rejected = 0;
+  for (uint64_t seed = 1; seed <= 12; ++seed) {
+    std::mt19937_64 rng(seed);
+    std::string bytes = original;
+    for (int k = 0; k < 20; ++k) bytes[rng() % bytes.size()] = static_cast<char>(rng());
+    try {
+      Mesh m = load_mesh_file(write("damaged.ply", bytes));
+      EXPECT_NO_THROW(check_mesh(m));
+    } catch (const Error& e) {
+      ++rejected;
+      EXPECT_NE(std::string(e.what()).find("damaged.ply"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_GT(rejected, 0);
+}
+
+TEST_F(BadInput, TruncatedGlb) {
+  const fs::path source = testing::scenes_dir() / "2CylinderEngine.glb";
+  if (!fs::exists(source)) GTEST_SKIP() << "no " << source;
+  std::ifstream in(source, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_GT(bytes.size(), 100000u);
+  // Cut inside the binary buffer, and cut inside the JSON chunk.
+  expect_rejected(write("half.glb", bytes.substr(0, bytes.size() / 2)), {});
+  expect_rejected(write("head.glb", bytes.substr(0, 4000)), {});
+}
+
+TEST_F(BadInput, GoodFileStillLoads) {
+  // The control: the same writer and loader accept a well-formed file, degenerate
+  // triangle included.
+  Mesh m = load_mesh_file(write("good.obj", kTriangleVertices + "v 2 0 0\nf 1 2 3\nf 1 2 4\n"));
+  EXPECT_EQ(m.triangle_count(), 2u);
+  EXPECT_EQ(m.name, "good.obj");
+  EXPECT_EQ(describe(m).degenerate_triangles, 1u);
+}
+
+}  // namespace
+}  // namespace bvhopt

@@ -1,0 +1,369 @@
+// Every builder over many random scenes: tree invariants, exact costs, the optimal-tree
+// oracle, a brute-force reference for the sweep, and the same tree on 1 and 2 threads.
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "bvhopt/build.h"
+#include "bvhopt/cost.h"
+#include "bvhopt/validate.h"
+#include "test_support.h"
+
+namespace bvhopt {
+namespace {
+
+using testing::optimal_tree_cost;
+using testing::random_mesh;
+using testing::random_refs;
+using testing::tree_signature;
+
+Bvh build_with(BuilderKind kind, const PrimitiveRefs& refs, uint32_t max_leaf, uint32_t parallel_threshold) {
+  LeafConfig leaf{max_leaf};
+  switch (kind) {
+    case BuilderKind::sweep_sah: {
+      SweepSahConfig c;
+      c.leaf = leaf;
+      c.parallel_threshold = parallel_threshold;
+      return build_sweep_sah(refs, c);
+    }
+    case BuilderKind::binned_sah: {
+      BinnedSahConfig c;
+      c.leaf = leaf;
+      c.parallel_threshold = parallel_threshold;
+      // Low enough that the parallel binning path runs in the tests too.
+      c.parallel_binning_threshold = std::max<uint32_t>(parallel_threshold, 64);
+      return build_binned_sah(refs, c);
+    }
+    case BuilderKind::spatial_median: {
+      MedianConfig c;
+      c.leaf = leaf;
+      c.parallel_threshold = parallel_threshold;
+      return build_spatial_median(refs, c);
+    }
+    case BuilderKind::object_median: {
+      MedianConfig c;
+      c.leaf = leaf;
+      c.parallel_threshold = parallel_threshold;
+      return build_object_median(refs, c);
+    }
+  }
+  return {};
+}
+
+// Invariants checked independently of validate(): every reference in exactly one leaf,
+// links agree, boxes are exact unions, leaf sizes within the limit, nodes all reachable.
+void check_tree(const Bvh& bvh, const PrimitiveRefs& refs, uint32_t max_leaf, const std::string& what) {
+  SCOPED_TRACE(what);
+  ValidationReport report = validate(bvh, refs);
+  ASSERT_TRUE(report.ok()) << report.summary();
+  if (refs.empty()) {
+    EXPECT_TRUE(bvh.empty());
+    return;
+  }
+  ASSERT_FALSE(bvh.empty());
+  ASSERT_EQ(bvh[bvh.root].parent, kInvalidNode);
+  std::vector<int> seen(refs.size(), 0);
+  size_t reached = 0;
+  std::vector<uint32_t> stack{bvh.root};
+  while (!stack.empty()) {
+    uint32_t n = stack.back();
+    stack.pop_back();
+    ASSERT_LT(n, bvh.nodes.size());
+    ++reached;
+    const BvhNode& nd = bvh[n];
+    ASSERT_EQ(nd.area, nd.box.area()) << "node " << n;
+    Box expect;
+    if (nd.is_leaf()) {
+      ASSERT_GE(nd.ref_count(), 1u) << "node " << n;
+      ASSERT_LE(nd.ref_count(), max_leaf) << "node " << n;
+      ASSERT_LE(size_t(nd.first_ref()) + nd.ref_count(), bvh.ref_indices.size());
+      for (uint32_t i = 0; i < nd.ref_count(); ++i) {
+        uint32_t id = bvh.ref_indices[nd.first_ref() + i];
+        ASSERT_LT(id, refs.size());
+        ++seen[id];
+        expect.extend(refs.boxes[id]);
+      }
+    } else {
+      for (int c = 0; c < 2; ++c) {
+        ASSERT_LT(nd.child(c), bvh.nodes.size());
+        ASSERT_EQ(bvh[nd.child(c)].parent, n) << "node " << n;
+        expect.extend(bvh[nd.child(c)].box);
+        stack.push_back(nd.child(c));
+      }
+    }
+    ASSERT_EQ(nd.box, expect) << "node " << n;
+  }
+  // The builders compact their trees: no unused nodes are left behind.
+  EXPECT_EQ(reached, bvh.nodes.size());
+  for (size_t i = 0; i < refs.size(); ++i) ASSERT_EQ(seen[i], 1) << "reference " << i;
+}
+
+// The SAH cost recomputed from scratch, boxes from the references, not from the nodes.
+double cost_from_scratch(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& m) {
+  double total = 0.0;
+  auto rec = [&](auto&& self, uint32_t n) -> Box {
+    const BvhNode& nd = bvh[n];
+    Box b;
+    if (nd.is_leaf()) {
+      for (uint32_t i = 0; i < nd.ref_count(); ++i) b.extend(refs.boxes[bvh.ref_indices[nd.first_ref() + i]]);
+      total += m.intersection * double(b.area()) * nd.ref_count();
+    } else {
+      b = merge(self(self, nd.left()), self(self, nd.right()));
+      total += m.traversal * double(b.area());
+    }
+    return b;
+  };
+  Box root = rec(rec, bvh.root);
+  return total / double(root.area());
+}
+
+std::string name_of(BuilderKind k) { return std::string(builder_name(k)); }
+
+TEST(Builders, RandomScenesGiveValidTreesWithExactCosts) {
+  for (BuilderKind kind : all_builders()) {
+    for (uint32_t max_leaf : {1u, 4u}) {
+      for (uint64_t seed = 0; seed < 12; ++seed) {
+        uint32_t count = 1 + static_cast<uint32_t>((seed * 977) % 3000);
+        PrimitiveRefs refs = seed % 2 ? random_refs(count, seed)
+                                      : make_references(random_mesh(count, seed, /*with_degenerate=*/true));
+        Bvh bvh = build_with(kind, refs, max_leaf, 256);
+        std::string what = name_of(kind) + " leaf " + std::to_string(max_leaf) + " seed " + std::to_string(seed);
+        check_tree(bvh, refs, max_leaf, what);
+        if (::testing::Test::HasFatalFailure()) return;
+        double reported = sah_cost(bvh);
+        EXPECT_NEAR(cost_from_scratch(bvh, refs, {}), reported, 1e-9 * reported) << what;
+      }
+    }
+  }
+}
+
+TEST(Builders, NoBuilderBeatsTheOptimalTree) {
+  const CostModel m;
+  for (BuilderKind kind : all_builders()) {
+    for (uint32_t count = 2; count <= 10; ++count) {
+      for (uint64_t seed = 0; seed < 25; ++seed) {
+        PrimitiveRefs refs = random_refs(count, 1000 * count + seed);
+        Bvh bvh = build_with(kind, refs, 1, 4096);
+        double ours = sah_cost(bvh, m) * double(bvh[bvh.root].area);
+        double best = optimal_tree_cost(refs, m.traversal, m.intersection);
+        EXPECT_GE(ours, best * (1.0 - 1e-6)) << name_of(kind) << " n=" << count << " seed " << seed;
+      }
+    }
+  }
+}
+
+TEST(Builders, SahBuildersComeCloseToTheOptimumOnTinyInputs) {
+  // Not a bound the algorithms guarantee, but a broken sweep or binning lands far above.
+  const CostModel m;
+  for (BuilderKind kind : {BuilderKind::sweep_sah, BuilderKind::binned_sah}) {
+    double ratio_sum = 0.0;
+    int runs = 0;
+    for (uint32_t count = 4; count <= 10; ++count)
+      for (uint64_t seed = 0; seed < 10; ++seed) {
+        PrimitiveRefs refs = random_refs(count, 77 * count + seed);
+        Bvh bvh = build_with(kind, refs, 1, 4096);
+        ratio_sum += sah_cost(bvh, m) * double(bvh[bvh.root].area) / optimal_tree_cost(refs, m.traversal, m.intersection);
+        ++runs;
+      }
+    EXPECT_LT(ratio_sum / runs, 1.10) << name_of(kind);
+  }
+}
+
+// The textbook top-down sweep: per node, sort the node's references on each axis by
+// (centroid, id) and try every position, with the tie rules the builder documents.
+// O(n^2 log n), written for clarity only.
+std::string brute_force_sweep(const PrimitiveRefs& refs, uint32_t max_leaf, const CostModel& m) {
+  auto sorted_by = [&](std::vector<uint32_t> ids, int a) {
+    std::sort(ids.begin(), ids.end(), [&](uint32_t x, uint32_t y) {
+      float cx = refs.centroids[x][a] + 0.0f, cy = refs.centroids[y][a] + 0.0f;
+      return cx < cy || (cx == cy && x < y);
+    });
+    return ids;
+  };
+  auto bounds = [&](const std::vector<uint32_t>& ids, size_t from, size_t to) {
+    Box b;
+    for (size_t k = from; k < to; ++k) b.extend(refs.boxes[ids[k]]);
+    return b;
+  };
+  auto rec = [&](auto&& self, const std::vector<uint32_t>& ids) -> std::string {
+    const size_t count = ids.size();
+    std::vector<uint32_t> by_x = sorted_by(ids, 0);
+    auto leaf = [&] {
+      std::string s = "[";
+      for (size_t k = 0; k < count; ++k) {
+        if (k) s += ' ';
+        s += std::to_string(refs.triangle_ids[by_x[k]]);
+      }
+      return s + "]";
+    };
+    if (count == 1) return leaf();
+    bool coincide = true;
+    for (int a = 0; a < 3; ++a) {
+      std::vector<uint32_t> s = sorted_by(ids, a);
+      if (refs.centroids[s.front()][a] != refs.centroids[s.back()][a]) coincide = false;
+    }
+    std::vector<uint32_t> best_order;
+    size_t best_k = 0;
+    float best_cost = std::numeric_limits<float>::infinity();
+    size_t best_balance = ~size_t(0);
+    if (coincide) {
+      best_order = by_x;
+      best_k = count / 2;
+      best_cost = bounds(by_x, 0, best_k).area() * float(best_k) + bounds(by_x, best_k, count).area() * float(count - best_k);
+    } else {
+      for (int a = 0; a < 3; ++a) {
+        std::vector<uint32_t> s = sorted_by(ids, a);
+        for (size_t k = 1; k < count; ++k) {
+          float c = bounds(s, 0, k).area_unchecked() * float(k) + bounds(s, k, count).area_unchecked() * float(count - k);
+          size_t balance = k * 2 > count ? k * 2 - count : count - k * 2;
+          if (c < best_cost || (c == best_cost && balance < best_balance)) {
+            best_cost = c;
+            best_balance = balance;
+            best_k = k;
+            best_order = s;
+          }
+        }
+      }
+    }
+    double area = bounds(ids, 0, count).area();
+    if (count <= max_leaf && m.intersection * area * double(count) <= m.traversal * area + m.intersection * double(best_cost))
+      return leaf();
+    std::vector<uint32_t> l(best_order.begin(), best_order.begin() + best_k), r(best_order.begin() + best_k, best_order.end());
+    std::string s = "(";
+    s += self(self, l);
+    s += ',';
+    s += self(self, r);
+    s += ')';
+    return s;
+  };
+  std::vector<uint32_t> all(refs.size());
+  std::iota(all.begin(), all.end(), 0u);
+  return rec(rec, all);
+}
+
+TEST(Builders, SweepEqualsBruteForceSweep) {
+  for (uint32_t max_leaf : {1u, 4u}) {
+    for (uint64_t seed = 0; seed < 40; ++seed) {
+      uint32_t count = 1 + static_cast<uint32_t>(seed * 7 % 90);
+      PrimitiveRefs refs = seed % 3 == 0 ? make_references(random_mesh(count, seed, true)) : random_refs(count, seed);
+      if (seed % 5 == 1)  // some exact duplicates, to exercise the tie rules
+        for (size_t i = 0; i + 3 < refs.size(); i += 4) {
+          refs.boxes[i + 1] = refs.boxes[i];
+          refs.centroids[i + 1] = refs.centroids[i];
+        }
+      SweepSahConfig c;
+      c.leaf.max_leaf_size = max_leaf;
+      c.parallel_threshold = 8;
+      Bvh bvh = build_sweep_sah(refs, c);
+      EXPECT_EQ(tree_signature(bvh, refs), brute_force_sweep(refs, max_leaf, c.cost))
+          << "seed " << seed << " leaf " << max_leaf;
+    }
+  }
+}
+
+TEST(Builders, SameTreeOnOneAndTwoThreads) {
+  for (BuilderKind kind : all_builders()) {
+    for (uint32_t max_leaf : {1u, 4u}) {
+      PrimitiveRefs refs = make_references(random_mesh(6000, 99 + max_leaf, true));
+      std::string one, two;
+      {
+        tbb::global_control gc(tbb::global_control::max_allowed_parallelism, 1);
+        one = tree_signature(build_with(kind, refs, max_leaf, 32), refs);
+      }
+      {
+        tbb::global_control gc(tbb::global_control::max_allowed_parallelism, 2);
+        // Twice, since task scheduling differs from run to run.
+        for (int rep = 0; rep < 2; ++rep) {
+          two = tree_signature(build_with(kind, refs, max_leaf, 32), refs);
+          EXPECT_EQ(one, two) << name_of(kind) << " leaf " << max_leaf;
+        }
+      }
+    }
+  }
+}
+
+TEST(Builders, EdgeCases) {
+  for (BuilderKind kind : all_builders()) {
+    SCOPED_TRACE(name_of(kind));
+    for (uint32_t max_leaf : {1u, 4u}) {
+      PrimitiveRefs none;
+      Bvh empty = build_with(kind, none, max_leaf, 4096);
+      EXPECT_TRUE(empty.empty());
+      EXPECT_TRUE(empty.nodes.empty());
+      EXPECT_EQ(sah_cost(empty), 0.0);
+
+      PrimitiveRefs one = random_refs(1, 5);
+      Bvh b1 = build_with(kind, one, max_leaf, 4096);
+      check_tree(b1, one, max_leaf, "one ref");
+      EXPECT_EQ(b1.nodes.size(), 1u);
+
+      PrimitiveRefs two = random_refs(2, 6);
+      Bvh b2 = build_with(kind, two, max_leaf, 4096);
+      check_tree(b2, two, max_leaf, "two refs");
+
+      // Identical boxes: every split costs the same; the tree must still be balanced.
+      std::vector<Box> same(1000, Box(Vec3(1, 2, 3), Vec3(2, 3, 5)));
+      PrimitiveRefs identical = make_references(same);
+      Bvh bi = build_with(kind, identical, max_leaf, 64);
+      check_tree(bi, identical, max_leaf, "identical boxes");
+      uint32_t depth = 0;
+      auto rec = [&](auto&& self, uint32_t n, uint32_t d) -> void {
+        depth = std::max(depth, d);
+        if (!bi[n].is_leaf()) {
+          self(self, bi[n].left(), d + 1);
+          self(self, bi[n].right(), d + 1);
+        }
+      };
+      rec(rec, bi.root, 0);
+      EXPECT_LE(depth, 11u);
+
+      // Points (zero-area boxes), some coincident, some on one line.
+      std::vector<Box> points;
+      for (int i = 0; i < 300; ++i) {
+        Vec3 p(float(i % 17), i % 3 == 0 ? 0.0f : float(i % 5), 0.0f);
+        points.emplace_back(p, p);
+      }
+      PrimitiveRefs pr = make_references(points);
+      check_tree(build_with(kind, pr, max_leaf, 64), pr, max_leaf, "points");
+    }
+  }
+}
+
+TEST(Builders, SahBuildersBeatMediansOnRandomMeshes) {
+  PrimitiveRefs refs = make_references(random_mesh(20000, 3, true));
+  double sweep = sah_cost(build_with(BuilderKind::sweep_sah, refs, 1, 4096));
+  double binned = sah_cost(build_with(BuilderKind::binned_sah, refs, 1, 4096));
+  double spatial = sah_cost(build_with(BuilderKind::spatial_median, refs, 1, 4096));
+  double object = sah_cost(build_with(BuilderKind::object_median, refs, 1, 4096));
+  EXPECT_LT(sweep, spatial);
+  EXPECT_LT(sweep, object);
+  EXPECT_LT(binned, spatial);
+  EXPECT_LT(binned, object);
+  // Binning approximates the sweep: within a few percent on uniform random input.
+  EXPECT_LT(binned, sweep * 1.05);
+}
+
+TEST(Builders, BinnedSahHonoursBinCount) {
+  PrimitiveRefs refs = make_references(random_mesh(5000, 8, false));
+  for (uint32_t bins : {2u, 4u, 16u, 64u, 256u, 1000u}) {
+    BinnedSahConfig c;
+    c.bin_count = bins;
+    c.refs_per_bin = 0;  // exactly bin_count bins in every node
+    Bvh bvh = build_binned_sah(refs, c);
+    check_tree(bvh, refs, 1, "bins " + std::to_string(bins));
+  }
+  BinnedSahConfig few, many;
+  few.bin_count = 4;
+  many.bin_count = 64;
+  few.refs_per_bin = many.refs_per_bin = 0;
+  EXPECT_LT(sah_cost(build_binned_sah(refs, many)), sah_cost(build_binned_sah(refs, few)));
+}
+
+}  // namespace
+}  // namespace bvhopt

@@ -1,0 +1,120 @@
+// End-to-end tests of the bvhopt program: exit codes, outputs, error messages.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <set>
+#include <string>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct CliRun {
+  int exit_code;
+  std::string out, err;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const char* bin = std::getenv("BVHOPT_BIN_DIR");
+    if (!bin) GTEST_SKIP() << "BVHOPT_BIN_DIR not set (run through ctest)";
+    exe_ = fs::path(bin) / "bvhopt";
+    if (!fs::exists(exe_)) GTEST_SKIP() << "bvhopt program not built";
+    dir_ = fs::temp_directory_path() /
+           ("bvhopt_cli_test_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    if (!dir_.empty()) fs::remove_all(dir_);
+  }
+  CliRun run(const std::string& args) {
+    fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
+    std::string cmd = exe_.string() + " " + args + " >" + out.string() + " 2>" + err.string() + " </dev/null";
+    int status = std::system(cmd.c_str());
+    return {WEXITSTATUS(status), slurp(out), slurp(err)};
+  }
+  fs::path exe_, dir_;
+};
+
+TEST_F(Cli, HelpListsTheSubcommands) {
+  CliRun r = run("--help");
+  EXPECT_EQ(r.exit_code, 0);
+  for (const char* sub : {"info", "build", "stats", "demo"}) EXPECT_NE(r.out.find(sub), std::string::npos) << sub;
+}
+
+TEST_F(Cli, NoSubcommandIsAnError) {
+  CliRun r = run("");
+  EXPECT_NE(r.exit_code, 0);
+}
+
+TEST_F(Cli, BuildThenStatsAgreeOnTheCost) {
+  fs::path bvh = dir_ / "scene.bvh";
+  CliRun b = run("build 'builtin?triangles=3000' --builder binned --json -o " + bvh.string());
+  ASSERT_EQ(b.exit_code, 0) << b.err;
+  ASSERT_TRUE(fs::exists(bvh));
+  auto built = nlohmann::json::parse(b.out);
+  CliRun s = run("stats --json " + bvh.string());
+  ASSERT_EQ(s.exit_code, 0) << s.err;
+  auto stats = nlohmann::json::parse(s.out);
+  EXPECT_GT(built["cost"].get<double>(), 0.0);
+  EXPECT_DOUBLE_EQ(built["cost"].get<double>(), stats["cost"].get<double>());
+  EXPECT_EQ(stats["method"], "binned");
+  EXPECT_EQ(stats["references"].get<size_t>(), built["triangles"].get<size_t>());
+}
+
+TEST_F(Cli, MissingSceneNamesTheFile) {
+  CliRun r = run("info " + (dir_ / "no_such_scene.obj").string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("no_such_scene.obj"), std::string::npos) << r.err;
+}
+
+TEST_F(Cli, UnknownBuilderIsRejected) {
+  CliRun r = run("build builtin --builder fastest -o " + (dir_ / "x.bvh").string());
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_FALSE(fs::exists(dir_ / "x.bvh"));
+}
+
+TEST_F(Cli, CorruptBvhFileIsRejectedWithItsName) {
+  fs::path bad = dir_ / "corrupt.bvh";
+  std::ofstream(bad) << "this is not a bvh file at all";
+  CliRun r = run("stats " + bad.string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("corrupt.bvh"), std::string::npos) << r.err;
+}
+
+TEST_F(Cli, FailedWriteLeavesNothingBehind) {
+  fs::path target = dir_ / "missing_dir" / "out.bvh";
+  CliRun r = run("build 'builtin?triangles=1000' -o " + target.string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_FALSE(fs::exists(dir_ / "missing_dir"));
+  EXPECT_NE(r.err.find("out.bvh"), std::string::npos) << r.err;
+}
+
+TEST_F(Cli, DemoPrintsARowPerBuilder) {
+  CliRun r = run("demo --triangles 5000 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto j = nlohmann::json::parse(r.out);
+  std::set<std::string> methods;
+  for (const auto& row : j["rows"]) {
+    methods.insert(row["method"].get<std::string>());
+    EXPECT_GT(row["cost"].get<double>(), 0.0);
+    EXPECT_LE(row["ocost"].get<double>(), row["cost"].get<double>() + 1e-9);
+  }
+  for (const char* m : {"sweep", "binned", "spatial-median", "object-median"}) EXPECT_TRUE(methods.count(m)) << m;
+}
+
+}  // namespace

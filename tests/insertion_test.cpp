@@ -1,0 +1,336 @@
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include "bvhopt/cost.h"
+#include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/median_builder.h"
+#include "bvhopt/sweep_sah_builder.h"
+#include "bvhopt/validate.h"
+#include "test_support.h"
+
+namespace bvhopt {
+namespace {
+
+Bvh build_start(const PrimitiveRefs& refs, int kind) {
+  switch (kind % 3) {
+    case 0: return build_sweep_sah(refs);
+    case 1: return build_spatial_median(refs);
+    default: return build_object_median(refs);
+  }
+}
+
+double relative_gap(double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-300); }
+
+// Algorithm 1 must find the same minimum as trying every node, including when a subtree
+// is excluded (the parallel form's searches).
+TEST(InsertionSearch, BranchAndBoundEqualsBruteForce) {
+  std::mt19937_64 rng(12345);
+  int with_exclusion = 0;
+  for (uint32_t trial = 0; trial < 3000; ++trial) {
+    const uint32_t count = 2 + static_cast<uint32_t>(rng() % 150);
+    PrimitiveRefs refs = testing::random_refs(count, trial);
+    Bvh bvh = build_start(refs, static_cast<int>(trial));
+    // The query: a random box, sometimes tiny, sometimes larger than the whole scene.
+    PrimitiveRefs q = testing::random_refs(1, 100000 + trial);
+    Box box = q.boxes[0];
+    if (trial % 5 == 0) box = Box(box.min * 0.5f - Vec3(5.0f), box.max * 1.5f);
+    if (trial % 7 == 0) box = Box(box.min, box.min);  // a point
+    uint32_t skip = kInvalidNode, through = kInvalidNode;
+    if (trial % 2 == 1) {
+      std::vector<uint32_t> inner;
+      for (uint32_t n : bvh.depth_first_order())
+        if (!bvh[n].is_leaf() && n != bvh.root) inner.push_back(n);
+      if (!inner.empty()) {
+        skip = inner[rng() % inner.size()];
+        through = bvh[skip].parent;
+        ++with_exclusion;
+      }
+    }
+    ReinsertionCandidate fast = find_reinsertion(bvh, box, skip, through);
+    ReinsertionCandidate slow = find_reinsertion_brute_force(bvh, box, skip, through);
+    ASSERT_NE(fast.node, kInvalidNode) << "trial " << trial;
+    ASSERT_EQ(fast.cost, slow.cost) << "trial " << trial << " refs " << count;
+    ASSERT_NE(fast.node, skip);
+    ASSERT_NE(fast.node, through);
+  }
+  EXPECT_GT(with_exclusion, 1000);
+}
+
+// The removal-aware search (the parallel form's) must equal a brute-force scan of the tree
+// after an actual removal, and its freed area must equal the drop in the sum of inner areas.
+TEST(InsertionSearch, AfterRemovalEqualsBruteForceOnTheRemovedTree) {
+  std::mt19937_64 rng(777);
+  int checked = 0;
+  for (uint32_t trial = 0; trial < 2000; ++trial) {
+    const uint32_t count = 3 + static_cast<uint32_t>(rng() % 150);
+    PrimitiveRefs refs = testing::random_refs(count, 20000 + trial);
+    Bvh bvh = build_start(refs, static_cast<int>(trial));
+    std::vector<uint32_t> inner;
+    for (uint32_t n : bvh.depth_first_order())
+      if (!bvh[n].is_leaf() && n != bvh.root) inner.push_back(n);
+    if (inner.empty()) continue;
+    const uint32_t n = inner[rng() % inner.size()];
+    const Box box = bvh[trial % 2 ? bvh[n].left() : bvh[n].right()].box;
+    double freed = 0.0;
+    ReinsertionCandidate fast = find_reinsertion_after_removal(bvh, box, n, &freed);
+
+    auto inner_sum = [](const Bvh& t, uint32_t from) {
+      double sum = 0.0;
+      std::vector<uint32_t> stack{from};
+      while (!stack.empty()) {
+        const uint32_t v = stack.back();
+        stack.pop_back();
+        if (t[v].is_leaf()) continue;
+        sum += t[v].area;
+        stack.push_back(t[v].left());
+        stack.push_back(t[v].right());
+      }
+      return sum;
+    };
+    const double before = inner_sum(bvh, bvh.root);
+    // What stays inner but leaves the tree with n: the subtrees below n's children.
+    const double carried = inner_sum(bvh, bvh[n].left()) + inner_sum(bvh, bvh[n].right());
+    Bvh removed = bvh;
+    const uint32_t p = removed[n].parent, s = removed.sibling(n), g = removed[p].parent;
+    if (g == kInvalidNode) {
+      removed.root = s;
+      removed[s].parent = kInvalidNode;
+    } else {
+      removed[g].set_child(removed.child_slot(p), s);
+      removed[s].parent = g;
+      removed.refit_upwards(g);
+    }
+    ReinsertionCandidate slow = find_reinsertion_brute_force(removed, box);
+    ASSERT_EQ(fast.cost, slow.cost) << "trial " << trial;
+    ASSERT_NEAR(freed, before - inner_sum(removed, removed.root) - carried, 1e-9 * before) << "trial " << trial;
+    ++checked;
+  }
+  EXPECT_GT(checked, 1900);
+}
+
+// Brute force on a hand-made tree: the best place is the leaf the new box overlaps.
+TEST(InsertionSearch, HandExample) {
+  PrimitiveRefs refs = make_references({Box({0, 0, 0}, {1, 1, 1}), Box({10, 0, 0}, {11, 1, 1}),
+                                        Box({20, 0, 0}, {21, 1, 1}), Box({30, 0, 0}, {31, 1, 1})});
+  Bvh bvh = build_object_median(refs);
+  ReinsertionCandidate c = find_reinsertion(bvh, Box({30.2f, 0, 0}, {30.8f, 1, 1}));
+  ASSERT_TRUE(bvh[c.node].is_leaf());
+  EXPECT_EQ(refs.boxes[bvh.ref_indices[bvh[c.node].first_ref()]].min.x, 30.0f);
+  // Merged with the leaf: SA = 6, nothing above grows.
+  EXPECT_DOUBLE_EQ(c.cost, 6.0);
+}
+
+void check_every_move(InsertionForm form, InsertionMeasure measure) {
+  PrimitiveRefs refs = testing::random_refs(400, 7 + static_cast<int>(form));
+  Bvh bvh = build_spatial_median(refs);
+  InsertionConfig cfg;
+  cfg.form = form;
+  cfg.measure = measure;
+  cfg.batch = 0.05;
+  cfg.max_passes = 30;
+  uint64_t checked = 0;
+  cfg.after_move = [&](const Bvh& t, double tracked) {
+    ValidationReport v = validate(t, refs);
+    ASSERT_TRUE(v.ok()) << v.summary();
+    ASSERT_EQ(t.nodes.size(), 2 * refs.size() - 1);
+    ASSERT_LT(relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
+    ++checked;
+  };
+  OptimizeReport r = optimize_insertion(bvh, cfg);
+  EXPECT_GT(checked, 20u);
+  EXPECT_TRUE(validate(bvh, refs).ok());
+  EXPECT_LT(relative_gap(r.final_cost, sah_cost(bvh)), 1e-9);
+  EXPECT_LT(r.final_cost, r.initial_cost * 0.99);
+}
+
+TEST(InsertionOptimizer, ValidAndCostTrackedAfterEveryMoveSequential) {
+  check_every_move(InsertionForm::sequential, InsertionMeasure::area);
+}
+TEST(InsertionOptimizer, ValidAndCostTrackedAfterEveryMoveParallel) {
+  check_every_move(InsertionForm::parallel, InsertionMeasure::area);
+}
+TEST(InsertionOptimizer, ValidAndCostTrackedAfterEveryMoveHybrid) {
+  check_every_move(InsertionForm::hybrid, InsertionMeasure::area);
+}
+TEST(InsertionOptimizer, ValidWithEveryMeasure) {
+  for (InsertionMeasure m : {InsertionMeasure::sum, InsertionMeasure::min, InsertionMeasure::comb}) {
+    check_every_move(InsertionForm::parallel, m);
+    check_every_move(InsertionForm::sequential, m);
+  }
+}
+
+TEST(InsertionOptimizer, ParallelFormNeverRaisesTheCost) {
+  PrimitiveRefs refs = testing::random_refs(3000, 3);
+  Bvh bvh = build_sweep_sah(refs);
+  InsertionConfig cfg;
+  cfg.form = InsertionForm::parallel;
+  OptimizeReport r = optimize_insertion(bvh, cfg);
+  ASSERT_FALSE(r.trace.empty());
+  double prev = r.initial_cost;
+  for (const PassRecord& p : r.trace) {
+    EXPECT_LE(p.cost, prev * (1 + 1e-12)) << "pass " << p.pass;
+    prev = p.cost;
+  }
+  EXPECT_LT(r.final_cost, r.initial_cost);
+}
+
+// Small inputs against the exact optimum (dynamic programming over subsets). Greedy
+// reinsertion is not guaranteed to find it; the test demands that it never reports less
+// than the optimum (which would mean a wrong cost), reaches it in most cases and stays
+// close on average.
+TEST(InsertionOptimizer, CloseToTheExactOptimumOnSmallInputs) {
+  for (InsertionForm form : {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid}) {
+    int cases = 0, optimal = 0;
+    double gap_sum = 0.0, worst = 0.0;
+    for (uint32_t seed = 0; seed < 300; ++seed) {
+      const uint32_t count = 3 + seed % 8;  // 3..10 references
+      PrimitiveRefs refs = testing::random_refs(count, 5000 + seed);
+      Bvh bvh = build_start(refs, static_cast<int>(seed));
+      InsertionConfig cfg;
+      cfg.form = form;
+      cfg.seed = seed;
+      // On a handful of nodes 1 % means one node per pass; every node per pass and a
+      // longer patience give the local search a fair chance.
+      cfg.batch = 1.0;
+      cfg.stop_after = 30;
+      OptimizeReport r = optimize_insertion(bvh, cfg);
+      ASSERT_TRUE(validate(bvh, refs).ok());
+      const double root_area = bvh[bvh.root].area;
+      const double opt = testing::optimal_tree_cost(refs, 3, 2) / root_area;
+      ASSERT_GE(r.final_cost, opt * (1 - 1e-9)) << "below the optimum: seed " << seed;
+      const double gap = r.final_cost / opt - 1.0;
+      gap_sum += gap;
+      worst = std::max(worst, gap);
+      optimal += gap < 1e-9;
+      ++cases;
+    }
+    const double mean_gap = gap_sum / cases;
+    std::printf("%s: optimal in %d of %d, mean gap %.4f%%, worst %.3f%%\n", std::string(form_name(form)).c_str(),
+                optimal, cases, 100 * mean_gap, 100 * worst);
+    // Measured: sequential 287/300 optimal, mean gap 0.07 %, worst 7.8 %; the parallel form
+    // never accepts a worse move, so it sticks in more local minima: 214/300, 1.3 %, 29 %.
+    if (form == InsertionForm::parallel) {
+      EXPECT_GE(optimal, cases * 65 / 100);
+      EXPECT_LT(mean_gap, 0.02);
+      EXPECT_LT(worst, 0.35);
+    } else {
+      EXPECT_GE(optimal, cases * 90 / 100);
+      EXPECT_LT(mean_gap, 0.005);
+      EXPECT_LT(worst, 0.10);
+    }
+  }
+}
+
+TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreads) {
+  PrimitiveRefs refs = testing::random_refs(6000, 11);
+  std::string sig[2];
+  double cost[2];
+  for (int t = 0; t < 2; ++t) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, t + 1);
+    Bvh bvh = build_spatial_median(refs);
+    InsertionConfig cfg;
+    cfg.seed = 99;
+    cfg.max_passes = 40;
+    cfg.random_after = 2;  // random passes too
+    cfg.stop_after = 1000;
+    OptimizeReport r = optimize_insertion(bvh, cfg);
+    EXPECT_EQ(r.passes, 40u);
+    sig[t] = testing::tree_signature(bvh, refs);
+    cost[t] = r.final_cost;
+  }
+  EXPECT_EQ(cost[0], cost[1]);
+  EXPECT_EQ(sig[0], sig[1]);
+}
+
+TEST(InsertionOptimizer, SameSeedSameTreeSequential) {
+  PrimitiveRefs refs = testing::random_refs(2000, 12);
+  std::string sig[2];
+  for (int t = 0; t < 2; ++t) {
+    Bvh bvh = build_object_median(refs);
+    InsertionConfig cfg;
+    cfg.form = InsertionForm::sequential;
+    cfg.random_after = 1;
+    cfg.max_passes = 30;
+    optimize_insertion(bvh, cfg);
+    sig[t] = testing::tree_signature(bvh, refs);
+  }
+  EXPECT_EQ(sig[0], sig[1]);
+}
+
+// The sequential form may raise the cost slightly (both children out at once) and then
+// oscillates; the pass limit must still end the run.
+TEST(InsertionOptimizer, PassLimitEndsAnOscillatingRun) {
+  PrimitiveRefs refs = testing::random_refs(500, 13);
+  for (InsertionForm form : {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid}) {
+    Bvh bvh = build_sweep_sah(refs);
+    InsertionConfig cfg;
+    cfg.form = form;
+    cfg.stop_after = std::numeric_limits<uint32_t>::max();
+    cfg.max_passes = 200;
+    cfg.batch = 0.2;
+    uint32_t callbacks = 0;
+    OptimizeReport r = optimize_insertion(bvh, cfg, [&](const PassRecord&) { ++callbacks; });
+    EXPECT_EQ(r.passes, 200u);
+    EXPECT_EQ(callbacks, 200u);
+    EXPECT_EQ(r.trace.size(), 200u);
+    EXPECT_EQ(r.stop_reason, "pass limit");
+    EXPECT_TRUE(validate(bvh, refs).ok());
+  }
+}
+
+TEST(InsertionOptimizer, ConvergesWithoutAPassLimit) {
+  PrimitiveRefs refs = testing::random_refs(1000, 14);
+  Bvh bvh = build_sweep_sah(refs);
+  InsertionConfig cfg;
+  cfg.max_passes = std::numeric_limits<uint32_t>::max();
+  OptimizeReport r = optimize_insertion(bvh, cfg);
+  EXPECT_EQ(r.stop_reason, "converged");
+  double lowest = r.initial_cost;
+  for (const PassRecord& p : r.trace) lowest = std::min(lowest, p.cost);
+  EXPECT_EQ(r.trace.back().best_cost, lowest);
+}
+
+// The paper's observation: from a spatial-median tree the optimizer ends close to where it
+// ends from an SAH tree.
+TEST(InsertionOptimizer, SpatialMedianStartApproachesSahStart) {
+  Mesh mesh = testing::random_mesh(20000, 21);
+  PrimitiveRefs refs = make_references(mesh);
+  Bvh sah = build_sweep_sah(refs);
+  Bvh med = build_spatial_median(refs);
+  const double sah_start = sah_cost(sah), med_start = sah_cost(med);
+  OptimizeReport rs = optimize_insertion(sah);
+  OptimizeReport rm = optimize_insertion(med);
+  std::printf("SAH start %.3f -> %.3f; spatial median start %.3f -> %.3f\n", sah_start, rs.final_cost, med_start,
+              rm.final_cost);
+  EXPECT_LT(rs.final_cost, sah_start);
+  EXPECT_LT(rm.final_cost, sah_start * 1.03);
+  EXPECT_LT(rm.final_cost, rs.final_cost * 1.01);  // measured: 0.3 % apart
+}
+
+TEST(InsertionOptimizer, TinyTreesAreLeftAlone) {
+  for (uint32_t count : {1u, 2u}) {
+    PrimitiveRefs refs = testing::random_refs(count, count);
+    Bvh bvh = build_sweep_sah(refs);
+    std::string before = testing::tree_signature(bvh, refs);
+    OptimizeReport r = optimize_insertion(bvh);
+    EXPECT_EQ(r.stop_reason, "nothing to optimize");
+    EXPECT_EQ(testing::tree_signature(bvh, refs), before);
+  }
+}
+
+TEST(InsertionOptimizer, MeasureNames) {
+  for (InsertionMeasure m : {InsertionMeasure::area, InsertionMeasure::sum, InsertionMeasure::min, InsertionMeasure::comb})
+    EXPECT_EQ(parse_measure(measure_name(m)), m);
+  EXPECT_FALSE(parse_measure("volume").has_value());
+  for (InsertionForm f : {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid})
+    EXPECT_EQ(parse_form(form_name(f)), f);
+  EXPECT_FALSE(parse_form("greedy").has_value());
+}
+
+}  // namespace
+}  // namespace bvhopt

@@ -1,0 +1,283 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+
+#include "bvhopt/build.h"
+#include "bvhopt/validate.h"
+#include "test_support.h"
+
+namespace bvhopt {
+namespace {
+
+bool has_problem(const ValidationReport& r, const std::string& needle) {
+  for (const auto& p : r.problems)
+    if (p.find(needle) != std::string::npos) return true;
+  return false;
+}
+
+struct Fixture {
+  PrimitiveRefs refs;
+  Bvh bvh;
+};
+
+Fixture make(uint32_t count, uint64_t seed, uint32_t leaf_size = 1, BuilderKind kind = BuilderKind::object_median) {
+  Fixture f;
+  f.refs = make_references(testing::random_mesh(count, seed));
+  BuildOptions o;
+  o.kind = kind;
+  o.leaf.max_leaf_size = leaf_size;
+  f.bvh = build_bvh(f.refs, o);
+  return f;
+}
+
+// A node at depth >= 2 that is an inner node, so its parent and grandparent exist.
+uint32_t deep_inner_node(const Bvh& bvh) {
+  for (uint32_t n : bvh.depth_first_order())
+    if (!bvh[n].is_leaf() && bvh[n].parent != kInvalidNode && bvh[bvh[n].parent].parent != kInvalidNode) return n;
+  return kInvalidNode;
+}
+
+uint32_t some_leaf(const Bvh& bvh, size_t skip = 3) {
+  for (uint32_t n : bvh.depth_first_order())
+    if (bvh[n].is_leaf() && skip-- == 0) return n;
+  return kInvalidNode;
+}
+
+TEST(Validate, PassesOnEveryBuilderOverManyRandomScenes) {
+  for (BuilderKind kind : all_builders())
+    for (uint32_t leaf : {1u, 4u})
+      for (uint64_t seed = 1; seed <= 6; ++seed) {
+        Fixture f = make(50 + 97 * static_cast<uint32_t>(seed), seed, leaf, kind);
+        ValidationReport r = validate(f.bvh, f.refs);
+        EXPECT_TRUE(r.ok()) << builder_name(kind) << " leaf " << leaf << " seed " << seed << ": " << r.summary();
+      }
+}
+
+TEST(Validate, PassesOnEmptyAndSingleReferenceTrees) {
+  PrimitiveRefs none;
+  Bvh empty;
+  EXPECT_TRUE(validate(empty, none).ok());
+  PrimitiveRefs one = make_references({Box({0, 0, 0}, {1, 1, 1})});
+  Bvh single = build_bvh(one);
+  EXPECT_TRUE(validate(single, one).ok()) << validate(single, one).summary();
+  // An empty tree over references leaves them all out.
+  EXPECT_TRUE(has_problem(validate(empty, one), "tree is empty"));
+}
+
+TEST(Validate, SwappedChildIndex) {
+  Fixture f = make(200, 7);
+  uint32_t n = deep_inner_node(f.bvh);
+  ASSERT_NE(n, kInvalidNode);
+  // Point n's left child at its sibling's subtree instead: the sibling is reached twice
+  // and the old left subtree is lost with all its references.
+  uint32_t sib = f.bvh.sibling(n);
+  f.bvh[n].set_child(0, sib);
+  ValidationReport r = validate(f.bvh, f.refs);
+  ASSERT_FALSE(r.ok());
+  EXPECT_TRUE(has_problem(r, "already reached")) << r.summary();
+  EXPECT_TRUE(has_problem(r, "is in no leaf")) << r.summary();
+}
+
+TEST(Validate, SwappedChildrenBetweenTwoNodesBreaksParentLinks) {
+  Fixture f = make(200, 8);
+  uint32_t n = deep_inner_node(f.bvh);
+  uint32_t p = f.bvh[n].parent;
+  uint32_t sib = f.bvh.sibling(n);
+  // Swap n's left child with its sibling: the set of nodes stays a tree, but the parent
+  // links no longer agree and the boxes no longer match their children.
+  uint32_t l = f.bvh[n].left();
+  f.bvh[n].set_child(0, sib);
+  f.bvh[p].set_child(f.bvh[p].left() == sib ? 0 : 1, l);
+  ValidationReport r = validate(f.bvh, f.refs);
+  EXPECT_TRUE(has_problem(r, "node " + std::to_string(l) + ": parent link is " + std::to_string(n))) << r.summary();
+  EXPECT_TRUE(has_problem(r, "node " + std::to_string(sib) + ": parent link is " + std::to_string(p))) << r.summary();
+}
+
+TEST(Validate, BrokenParentLink) {
+  Fixture f = make(100, 9);
+  uint32_t n = deep_inner_node(f.bvh);
+  f.bvh[n].parent = f.bvh.root;
+  ValidationReport r = validate(f.bvh, f.refs);
+  ASSERT_EQ(r.problems.size(), 1u) << r.summary();
+  EXPECT_NE(r.problems[0].find("node " + std::to_string(n) + ": parent link is"), std::string::npos);
+}
+
+TEST(Validate, RootWithAParent) {
+  Fixture f = make(20, 10);
+  f.bvh[f.bvh.root].parent = 3;
+  EXPECT_TRUE(has_problem(validate(f.bvh, f.refs), "(root): has parent link 3"));
+}
+
+TEST(Validate, ShrunkInnerBox) {
+  Fixture f = make(100, 11);
+  uint32_t n = deep_inner_node(f.bvh);
+  Box b = f.bvh[n].box;
+  b.max.x -= 0.25f * (b.max.x - b.min.x);
+  f.bvh[n].set_box(b);
+  ValidationReport r = validate(f.bvh, f.refs);
+  EXPECT_TRUE(has_problem(r, "node " + std::to_string(n) + ": box is not the union of its children")) << r.summary();
+}
+
+TEST(Validate, GrownInnerBox) {
+  Fixture f = make(100, 12);
+  uint32_t root = f.bvh.root;
+  Box b = f.bvh[root].box;
+  b.max.z = std::nextafter(b.max.z, 1e30f);  // one ulp: the union must be exact
+  f.bvh[root].set_box(b);
+  EXPECT_TRUE(has_problem(validate(f.bvh, f.refs), "node " + std::to_string(root) + ": box is not the union"));
+}
+
+TEST(Validate, ShrunkLeafBox) {
+  Fixture f = make(100, 13);
+  uint32_t leaf = some_leaf(f.bvh);
+  Box b = f.bvh[leaf].box;
+  b.min.y += 0.5f * (b.max.y - b.min.y);
+  f.bvh[leaf].set_box(b);
+  ValidationReport r = validate(f.bvh, f.refs);
+  EXPECT_TRUE(has_problem(r, "node " + std::to_string(leaf) + ": leaf box")) << r.summary();
+  EXPECT_TRUE(has_problem(r, "does not contain the box of reference")) << r.summary();
+}
+
+TEST(Validate, StaleCachedArea) {
+  Fixture f = make(50, 14);
+  uint32_t n = deep_inner_node(f.bvh);
+  f.bvh[n].area *= 1.001f;
+  ValidationReport r = validate(f.bvh, f.refs);
+  ASSERT_EQ(r.problems.size(), 1u) << r.summary();
+  EXPECT_TRUE(has_problem(r, "node " + std::to_string(n) + ": cached area")) << r.summary();
+  // Within the relative 1e-6 it passes.
+  f.bvh[n].area = f.bvh[n].box.area() * (1.0f + 2e-7f);
+  EXPECT_TRUE(validate(f.bvh, f.refs).ok());
+}
+
+TEST(Validate, DuplicatedReferenceSlot) {
+  Fixture f = make(100, 15);
+  // Slot 10 now holds the same reference as slot 20; slot 10's old reference is lost.
+  uint32_t lost = f.bvh.ref_indices[10];
+  f.bvh.ref_indices[10] = f.bvh.ref_indices[20];
+  ValidationReport r = validate(f.bvh, f.refs);
+  EXPECT_TRUE(has_problem(r, "reference " + std::to_string(f.bvh.ref_indices[20]) + " (slot")) << r.summary();
+  EXPECT_TRUE(has_problem(r, "is also in leaf node")) << r.summary();
+  EXPECT_TRUE(has_problem(r, "reference " + std::to_string(lost) + " is in no leaf")) << r.summary();
+}
+
+TEST(Validate, TwoLeavesSharingASlot) {
+  Fixture f = make(100, 16);
+  uint32_t a = some_leaf(f.bvh, 2), b = some_leaf(f.bvh, 5);
+  f.bvh[b].make_leaf(f.bvh[a].first_ref(), 1);
+  ValidationReport r = validate(f.bvh, f.refs);
+  EXPECT_TRUE(has_problem(r, "is also used by leaf node")) << r.summary();
+  EXPECT_TRUE(has_problem(r, "is in no leaf")) << r.summary();
+}
+
+TEST(Validate, DroppedReference) {
+  Fixture f = make(100, 17, 4);
+  uint32_t leaf = kInvalidNode;
+  for (uint32_t n : f.bvh.depth_first_order())
+    if (f.bvh[n].is_leaf() && f.bvh[n].ref_count() >= 2) leaf = n;
+  ASSERT_NE(leaf, kInvalidNode);
+  const BvhNode& nd = f.bvh[leaf];
+  uint32_t last_slot = nd.first_ref() + nd.ref_count() - 1;
+  uint32_t dropped = f.bvh.ref_indices[last_slot];
+  f.bvh[leaf].make_leaf(nd.first_ref(), nd.ref_count() - 1);
+  ValidationReport r = validate(f.bvh, f.refs);
+  EXPECT_TRUE(has_problem(r, "slot " + std::to_string(last_slot) + " (reference " + std::to_string(dropped) +
+                                 ") is in no leaf"))
+      << r.summary();
+  EXPECT_TRUE(has_problem(r, "reference " + std::to_string(dropped) + " is in no leaf")) << r.summary();
+}
+
+TEST(Validate, EmptyLeafAndSlotsOutOfRange) {
+  Fixture f = make(30, 18);
+  uint32_t a = some_leaf(f.bvh, 1), b = some_leaf(f.bvh, 4);
+  f.bvh[a].make_leaf(0, 0);
+  f.bvh[b].make_leaf(29, 5);
+  ValidationReport r = validate(f.bvh, f.refs);
+  EXPECT_TRUE(has_problem(r, "node " + std::to_string(a) + ": leaf holds no references")) << r.summary();
+  EXPECT_TRUE(has_problem(r, "node " + std::to_string(b) + ": leaf slots [29, 34) out of range (30 slots)"))
+      << r.summary();
+}
+
+TEST(Validate, ReferenceIdOutOfRange) {
+  Fixture f = make(30, 19);
+  f.bvh.ref_indices[4] = 1000;
+  EXPECT_TRUE(has_problem(validate(f.bvh, f.refs), "holds reference 1000, out of range (30 references)"));
+}
+
+TEST(Validate, ChildIndexAndRootOutOfRange) {
+  Fixture f = make(30, 20);
+  uint32_t n = deep_inner_node(f.bvh);
+  f.bvh[n].set_child(1, 123456);
+  EXPECT_TRUE(has_problem(validate(f.bvh, f.refs),
+                          "node " + std::to_string(n) + ": right child index 123456 out of range"));
+  Fixture g = make(30, 20);
+  g.bvh.root = 999;
+  EXPECT_TRUE(has_problem(validate(g.bvh, g.refs), "root: index 999 out of range"));
+}
+
+TEST(Validate, CycleIsReportedAndTerminates) {
+  Fixture f = make(300, 21);
+  // The deepest inner node's right child becomes the root: without cycle detection
+  // the walk would never end.
+  uint32_t deepest = kInvalidNode;
+  for (uint32_t n : f.bvh.depth_first_order())
+    if (!f.bvh[n].is_leaf()) deepest = n;
+  f.bvh[deepest].set_child(1, f.bvh.root);
+  ValidationReport r = validate(f.bvh, f.refs);
+  EXPECT_TRUE(has_problem(r, "node " + std::to_string(deepest) + ": right child " + std::to_string(f.bvh.root) +
+                                 " is already reached"))
+      << r.summary();
+
+  // A node that is its own child.
+  Fixture g = make(50, 22);
+  uint32_t n = deep_inner_node(g.bvh);
+  g.bvh[n].set_child(0, n);
+  EXPECT_TRUE(has_problem(validate(g.bvh, g.refs), "left child " + std::to_string(n) + " is the node itself"));
+}
+
+TEST(Validate, ProblemListIsCappedOnAHopelessTree) {
+  Fixture f = make(3000, 23);
+  for (auto& s : f.bvh.ref_indices) s = 0;  // every slot holds reference 0
+  ValidationReport r = validate(f.bvh, f.refs);
+  EXPECT_LE(r.problems.size(), 1001u);
+  EXPECT_NE(r.problems.back().find("more problems"), std::string::npos);
+  EXPECT_NE(r.summary().find("and "), std::string::npos);
+}
+
+// Random corruption of random fields: whatever the links say, validate must return
+// (the sanitizer build turns any out-of-bounds read into a failure) and, since every
+// change here breaks an invariant, must find something.
+TEST(Validate, RandomCorruptionNeverCrashesAndIsAlwaysFound) {
+  std::mt19937_64 rng(99);
+  for (int trial = 0; trial < 400; ++trial) {
+    Fixture f = make(40, 1000 + trial % 7, 1 + trial % 3);
+    ASSERT_TRUE(validate(f.bvh, f.refs).ok());
+    std::uniform_int_distribution<uint32_t> pick_node(0, static_cast<uint32_t>(f.bvh.nodes.size() - 1));
+    uint32_t n = pick_node(rng);
+    BvhNode& nd = f.bvh[n];
+    const uint32_t values[] = {0u, 1u, n, nd.parent, kInvalidNode, static_cast<uint32_t>(f.bvh.nodes.size()),
+                               pick_node(rng), static_cast<uint32_t>(rng())};
+    uint32_t v = values[rng() % 8];
+    switch (rng() % 3) {
+      case 0:
+        if (nd.parent == v) v ^= 1;
+        nd.parent = v;
+        break;
+      case 1:
+        if (nd.left_or_first == v) v += 1;
+        nd.left_or_first = v;
+        break;
+      case 2:
+        if (nd.right_or_count == v) v += 1;
+        nd.right_or_count = v;
+        break;
+    }
+    ValidationReport r = validate(f.bvh, f.refs);
+    EXPECT_FALSE(r.ok()) << "trial " << trial << " node " << n;
+  }
+}
+
+}  // namespace
+}  // namespace bvhopt
