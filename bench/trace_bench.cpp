@@ -10,7 +10,9 @@
 // each repeat so machine load drifts alike over all of them. Ratios are ours / Embree's.
 // 1-thread figures use the calling thread's CPU time (all the work runs there when oneTBB
 // allows one thread), so a shared machine does not skew them; --wall uses wall time.
-// 2-thread figures are wall time: they are only meaningful on an otherwise idle machine.
+// 2-thread figures are the process's CPU time over 2 (the wall time if each thread had its
+// own core), so 2t/1t measures parallel efficiency; --wall gives true wall times, which
+// mean something only on an otherwise idle machine.
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
@@ -136,6 +138,18 @@ double thread_cpu_seconds_of(const std::function<void()>& f) {
   f();
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
   return double(b.tv_sec - a.tv_sec) + 1e-9 * double(b.tv_nsec - a.tv_nsec);
+}
+
+// For a pass on T threads: the process's CPU time over T, i.e. the wall time the pass would
+// take if each of its threads had a core to itself. On a shared machine wall time measures
+// the other processes; this measures our parallel work, overheads included (idle workers
+// spinning count against us).
+double process_cpu_seconds_of(const std::function<void()>& f, int threads) {
+  timespec a{}, b{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &a);
+  f();
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &b);
+  return (double(b.tv_sec - a.tv_sec) + 1e-9 * double(b.tv_nsec - a.tv_nsec)) / threads;
 }
 
 double median(std::vector<double> v) {
@@ -383,8 +397,12 @@ int run(const Options& opt) {
       for (int r = 0; r < opt.repeats; ++r)
         for (Candidate& c : cands) {
           tbb::global_control limit(tbb::global_control::max_allowed_parallelism, c.threads);
-          c.times.push_back(c.threads == 1 && !opt.wall ? thread_cpu_seconds_of([&] { c.trace(hits); })
-                                                        : seconds_of([&] { c.trace(hits); }));
+          if (opt.wall)
+            c.times.push_back(seconds_of([&] { c.trace(hits); }));
+          else if (c.threads == 1)
+            c.times.push_back(thread_cpu_seconds_of([&] { c.trace(hits); }));
+          else
+            c.times.push_back(process_cpu_seconds_of([&] { c.trace(hits); }, c.threads));
         }
       auto mrays = [&](const std::string& label) {
         for (const Candidate& c : cands)

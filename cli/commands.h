@@ -10,5 +10,6 @@ void register_build_command(CLI::App& app);
 void register_stats_command(CLI::App& app);
 void register_demo_command(CLI::App& app);
 void register_compact_command(CLI::App& app);
+void register_experiment_command(CLI::App& app);
 
 }  // namespace bvhopt::cli

@@ -15,6 +15,7 @@ int main(int argc, char** argv) {
   bvhopt::cli::register_build_command(app);
   bvhopt::cli::register_stats_command(app);
   bvhopt::cli::register_demo_command(app);
+  bvhopt::cli::register_experiment_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

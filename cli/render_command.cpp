@@ -23,6 +23,7 @@ void register_render_command(CLI::App& app) {
     float range = 50.0f;
     std::string order = "axis";
     bool json = false;
+    CameraOptions camera;
   };
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand("render", "Heat map of traversal steps per pixel (primary rays), shaded image, "
@@ -42,6 +43,7 @@ void register_render_command(CLI::App& app) {
   cmd->add_option("--max-steps", opt->max_steps, "Steps shown as full red")->capture_default_str();
   cmd->add_option("--range", opt->range, "Step difference shown as full red/blue")->capture_default_str();
   cmd->add_option("--order", opt->order, "axis | distance")->check(CLI::IsMember({"axis", "distance"}))->capture_default_str();
+  opt->camera.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print a summary as JSON");
   cmd->callback([opt] {
@@ -49,7 +51,7 @@ void register_render_command(CLI::App& app) {
     const Mesh mesh = opt->scene.load();
     const LoadedTree tree = load_tree_for_scene(opt->bvh_file, mesh);
     const ChildOrder order = opt->order == "distance" ? ChildOrder::distance : ChildOrder::split_axis;
-    const Camera cam = default_camera(mesh, *tree.tracer, opt->width, opt->height);
+    const Camera cam = opt->camera.resolve(mesh, *tree.tracer, opt->width, opt->height);
     const std::vector<Ray> rays = camera_rays(cam);
 
     std::vector<Hit> hits;

@@ -49,6 +49,7 @@ void register_trace_command(CLI::App& app) {
     uint64_t check = 1000;
     int repeats = 3;
     uint32_t width = 1024, height = 768;
+    CameraOptions camera;
   };
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand("trace", "Trace a ray set through a BVH file: rays per second, steps, hit rate");
@@ -69,6 +70,7 @@ void register_trace_command(CLI::App& app) {
   cmd->add_option("--save-rays", opt->save_rays, "Write the ray set to this ray file")->type_name("FILE");
   cmd->add_option("--load-rays", opt->load_rays, "Trace the rays of this ray file instead of generating them")
       ->type_name("FILE");
+  opt->camera.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print the results as JSON");
   cmd->callback([opt] {
@@ -87,6 +89,8 @@ void register_trace_command(CLI::App& app) {
       cfg.count = opt->count;
       cfg.width = opt->width;
       cfg.height = opt->height;
+      cfg.up_axis = opt->camera.up_axis();
+      cfg.camera = opt->camera.resolve(mesh, *tree.tracer, opt->width, opt->height);
       set = make_ray_set(mesh, *tree.tracer, cfg);
     }
     if (!opt->save_rays.empty()) write_ray_file(opt->save_rays, set);

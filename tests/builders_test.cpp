@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <numeric>
 #include <string>
 #include <vector>
@@ -30,6 +31,8 @@ Bvh build_with(BuilderKind kind, const PrimitiveRefs& refs, uint32_t max_leaf, u
       SweepSahConfig c;
       c.leaf = leaf;
       c.parallel_threshold = parallel_threshold;
+      // Low enough that the three-axes-at-once path runs in the tests too.
+      c.parallel_split_threshold = std::max<uint32_t>(parallel_threshold, 64);
       return build_sweep_sah(refs, c);
     }
     case BuilderKind::binned_sah: {
@@ -260,6 +263,7 @@ TEST(Builders, SweepEqualsBruteForceSweep) {
       SweepSahConfig c;
       c.leaf.max_leaf_size = max_leaf;
       c.parallel_threshold = 8;
+      if (seed % 2) c.parallel_split_threshold = 16;  // both split paths against the reference
       Bvh bvh = build_sweep_sah(refs, c);
       EXPECT_EQ(tree_signature(bvh, refs), brute_force_sweep(refs, max_leaf, c.cost))
           << "seed " << seed << " leaf " << max_leaf;
@@ -285,6 +289,23 @@ TEST(Builders, SameTreeOnOneAndTwoThreads) {
         }
       }
     }
+  }
+}
+
+TEST(Builders, BinnedParallelBinningAndPartitionGiveTheSameTree) {
+  // Large enough for several partition blocks; the binned tree depends only on each
+  // node's set of references, so the sequential and parallel paths must agree.
+  PrimitiveRefs refs = make_references(random_mesh(50000, 17, true));
+  for (uint32_t max_leaf : {1u, 4u, 40u}) {
+    BinnedSahConfig sequential, parallel;
+    sequential.leaf.max_leaf_size = parallel.leaf.max_leaf_size = max_leaf;
+    sequential.parallel_binning_threshold = std::numeric_limits<uint32_t>::max();
+    parallel.parallel_binning_threshold = 100;
+    parallel.parallel_threshold = 64;
+    Bvh a = build_binned_sah(refs, sequential);
+    Bvh b = build_binned_sah(refs, parallel);
+    check_tree(b, refs, max_leaf, "parallel paths, leaf " + std::to_string(max_leaf));
+    EXPECT_EQ(tree_signature(a, refs), tree_signature(b, refs)) << "leaf " << max_leaf;
   }
 }
 

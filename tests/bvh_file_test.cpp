@@ -292,6 +292,19 @@ TEST_F(Rejections, EveryFlippedByteIsCaught) {
   EXPECT_EQ(read_error(bad_), "");
 }
 
+// A later minor addition at the end of the header (covered by header_size) is skipped.
+TEST_F(Rejections, UnknownHeaderBytesAreSkipped) {
+  const size_t hs = header_size();
+  auto b = bytes_;
+  b.insert(b.begin() + static_cast<long>(hs), {1, 2, 3, 4, 5});
+  patch<uint32_t>(b, kHeaderSizeAt, static_cast<uint32_t>(hs + 5));
+  reseal(b);
+  spit(bad_, b);
+  BvhFile f = read_bvh_file(bad_);
+  EXPECT_EQ(f.bvh.nodes.size(), s_.bvh.nodes.size());
+  EXPECT_EQ(f.info.method, s_.info.method);
+}
+
 TEST_F(Rejections, BogusCountsWithARecomputedChecksum) {
   // Huge: beyond what 32-bit indices can address.
   auto b = bytes_;

@@ -1,6 +1,9 @@
 #include <gtest/gtest.h>
 
+#include <tbb/global_control.h>
+
 #include <algorithm>
+#include <cstring>
 #include <numeric>
 
 #include "bvhopt/build.h"
@@ -215,6 +218,19 @@ TEST(Finalize, BuiltInSceneEveryBuilderBothOrders) {
       EXPECT_EQ(flat.triangle_ids.size(), refs.size());
     }
   }
+}
+
+TEST(Finalize, SameResultOnOneAndTwoThreads) {
+  PrimitiveRefs refs = scene(50000, 8);
+  Bvh bvh = build_object_median(refs);
+  auto run = [&](int threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    return finalize(bvh, refs);
+  };
+  FlatBvh one = run(1), two = run(2);
+  ASSERT_EQ(one.nodes.size(), two.nodes.size());
+  EXPECT_EQ(std::memcmp(one.nodes.data(), two.nodes.data(), one.nodes.size() * sizeof(FlatNode)), 0);
+  EXPECT_EQ(one.triangle_ids, two.triangle_ids);
 }
 
 TEST(Finalize, CorruptTreeThrowsInsteadOfLooping) {

@@ -27,7 +27,8 @@ struct BinnedSahConfig {
   // their sorted references instead of bins: near the leaves sorting a few references is
   // cheaper than clearing and sweeping 3 x bin_count bins, and finds the best split.
   uint32_t exact_sweep_below = 16;
-  // Nodes with at least this many references bin them in parallel (the top few levels).
+  // Nodes with at least this many references bin and partition them in parallel (the
+  // top few levels, which otherwise bound the speed-up: each is one long pass).
   uint32_t parallel_binning_threshold = 65536;
 };
 

@@ -33,16 +33,19 @@ enum class InsertionForm {
   // best place in the tree as it then is. One thread. May raise the cost for a pass; the
   // best tree seen is kept.
   sequential,
-  // Beyond the paper (after Meister and Bittner 2018): each pass searches the best move of
-  // every candidate's children on all threads against the tree as it stands (exact: the
-  // search sees the tree as it would be after the removal), then applies them in candidate
-  // order, skipping a move that touches a node an earlier move of the pass changed and
-  // undoing one that raised the cost. Never raises the cost; the tree does not depend on the
-  // thread count.
+  // Beyond the paper (after Meister and Bittner 2018): each pass finds, on all threads and
+  // against the tree as it stands, the best single-subtree move of each candidate's two
+  // children (the child and its parent out, the child back at the best place; the search
+  // sees the tree as it would be after that removal, so the gain is exact), keeps the better
+  // of the two if it gains, then applies the plans in candidate order, skipping a plan that
+  // touches a node an earlier move of the pass changed and undoing one that raised the cost
+  // (its boxes had changed). Never raises the cost; the tree does not depend on the thread
+  // count.
   parallel,
   // The sequential form until it stops, then the parallel form from its best tree: the fast
-  // large gains of the first, then the monotone polish of the second. The default: it gave
-  // the lowest costs in less time than either alone (bench/insertion_bench).
+  // large gains of the first, then the monotone polish of the second. The default: lowest
+  // final cost of the three on 10 of the 11 shared scenes (bench/insertion_bench), mostly in
+  // about the time of the parallel form alone.
   hybrid,
 };
 
@@ -55,8 +58,8 @@ struct InsertionConfig {
   // Fraction of the inner nodes updated per pass (the paper's k = 1 %); at least one node.
   double batch = 0.01;
   InsertionMeasure measure = InsertionMeasure::area;
-  // Passes without a lower cost before selection turns random (p_R), and before the
-  // optimizer stops (p_T); the paper's 5 and 10.
+  // Passes without a lower cost before selection turns random for the rest of the stage
+  // (p_R), and before the stage stops (p_T); the paper's 5 and 10.
   uint32_t random_after = 5;
   uint32_t stop_after = 10;
   // A pass counts as an improvement only when it lowers the best cost by more than this
@@ -70,8 +73,9 @@ struct InsertionConfig {
   // Every random choice (random selection passes) flows from this.
   uint64_t seed = 1;
   InsertionForm form = InsertionForm::hybrid;
-  // Test hook: called after every complete move (both children reinserted, or the move
-  // undone) with the tree and the tracked cost. Slows the optimizer down; leave empty.
+  // Test hook: called after every complete move (sequential: both children reinserted;
+  // parallel: a subtree moved, or a move undone) with the tree and the tracked cost. Slows
+  // the optimizer down; leave empty.
   std::function<void(const Bvh&, double tracked_cost)> after_move;
 };
 

@@ -41,11 +41,14 @@ struct Camera {
 // The default view of a scene, from its bounding box and a few probe rays.
 // Up is +y (the convention of the shared scenes' formats) unless `up_axis` says otherwise.
 // Interior: probe rays from the box centre along the six axis directions and the eight
-// diagonals; when at least 12 of the 14 hit geometry the centre is enclosed, and the camera
-// stands there looking along the longer horizontal axis of the box (toward +).
+// diagonals; when at least 12 of the 14 hit geometry, most of those hits are on front
+// faces (the centre is enclosed by walls facing it, not inside a closed solid whose back
+// faces it sees) and the median probe gets at least 30% of the way to the box boundary
+// (room to look), the camera stands there looking along the longer horizontal axis of the
+// box (toward +).
 // Exterior: the camera looks at the box centre along the shorter horizontal axis (so the
-// wide side fills the image), from outside at the distance where the bounding sphere fits
-// the vertical field of view, raised by a quarter of the sphere radius.
+// wide side fills the image), from outside, at the distance where the box's height and
+// width fill the image with a 10% margin.
 Camera default_camera(const Mesh& mesh, const Tracer& tracer, uint32_t width = 1024, uint32_t height = 768,
                       int up_axis = 1);
 

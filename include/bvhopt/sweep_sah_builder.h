@@ -12,6 +12,10 @@ struct SweepSahConfig {
   LeafConfig leaf;
   // Nodes with fewer references than this are built by one task (no further spawning).
   uint32_t parallel_threshold = 4096;
+  // Nodes with at least this many references sweep their three axes, and partition their
+  // lists, in parallel: the top nodes are long sequential passes otherwise. They hold 8
+  // more bytes per reference of scratch while they do.
+  uint32_t parallel_split_threshold = 32768;
 };
 
 // References are sorted once per axis by (centroid, id); each node sweeps the three sorted

@@ -178,10 +178,10 @@ ValidationReport validate(const Bvh& bvh, const PrimitiveRefs& refs) {
     }
   }
 
-  constexpr size_t kAhead = 16;
   // The references are checked in slot order rather than during the walk: slots are
   // contiguous, while reference ids are in no particular order, so each reference costs
   // a cache miss or two that prefetching a few slots ahead hides.
+  constexpr size_t kAhead = 16;
   for (size_t s = 0; s < slot_count; ++s) {
     if (s + kAhead < slot_count) {
       const uint32_t ahead = bvh.ref_indices[s + kAhead];

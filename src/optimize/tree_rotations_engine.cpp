@@ -98,22 +98,44 @@ void RotationEngine::relayout() {
   std::vector<double> cost(cost_.size());
   std::vector<uint32_t> size(size_.size());
   pairs[0].n[1] = node(1);
-  uint32_t next_pair = 1;
-  std::vector<std::pair<uint32_t, uint32_t>> stack{{0u, 0u}};  // (old slot, new slot)
-  while (!stack.empty()) {
-    auto [o, s] = stack.back();
-    stack.pop_back();
-    RotNode r = node(o);
-    cost[s] = cost_[o];
-    size[s] = size_[o];
-    if (r.first != kRotLeaf) {
-      const uint32_t c = 2 * next_pair++;
-      stack.push_back({r.first + 1, c + 1});
-      stack.push_back({r.first, c});
-      r.first = c;
+  // Depth-first allocation without a shared counter: a subtree of k leaves takes k - 1
+  // pairs, its root's children get the first, the left subtree the next ones and the right
+  // subtree the rest. So subtrees are laid out independently, the pieces in parallel (this
+  // is the only serial part of a pass otherwise).
+  struct Task {
+    uint32_t old_slot, new_slot, first_pair;
+  };
+  auto lay_out = [&](Task root, std::vector<Task>* pieces, std::vector<Task>& stack) {
+    stack.clear();
+    stack.push_back(root);
+    while (!stack.empty()) {
+      const Task t = stack.back();
+      stack.pop_back();
+      RotNode r = node(t.old_slot);
+      cost[t.new_slot] = cost_[t.old_slot];
+      size[t.new_slot] = size_[t.old_slot];
+      if (r.first != kRotLeaf) {
+        const uint32_t l = r.first;
+        const uint32_t c = 2 * t.first_pair;
+        const uint32_t left_pairs = is_leaf(l) ? 0 : size_[l] - 1;
+        const Task kids[2] = {{l, c, t.first_pair + 1}, {l + 1, c + 1, t.first_pair + 1 + left_pairs}};
+        for (int i = 1; i >= 0; --i) {
+          if (pieces && !is_leaf(kids[i].old_slot) && size_[kids[i].old_slot] <= cut_size_)
+            pieces->push_back(kids[i]);
+          else
+            stack.push_back(kids[i]);
+        }
+        r.first = c;
+      }
+      pairs[t.new_slot >> 1].n[t.new_slot & 1] = r;
     }
-    pairs[s >> 1].n[s & 1] = r;
-  }
+  };
+  std::vector<Task> pieces, stack;
+  lay_out(Task{0, 0, 1}, &pieces, stack);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, pieces.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
+    std::vector<Task> local;
+    for (size_t k = range.begin(); k != range.end(); ++k) lay_out(pieces[k], nullptr, local);
+  });
   pairs_ = std::move(pairs);
   cost_ = std::move(cost);
   size_ = std::move(size);

@@ -179,37 +179,50 @@ Camera default_camera(const Mesh& mesh, const Tracer& tracer, uint32_t width, ui
   const int long_axis = ext[h0] >= ext[h1] ? h0 : h1;
   const int short_axis = long_axis == h0 ? h1 : h0;
 
-  int hits = 0;
+  int hits = 0, front = 0;
+  std::vector<float> reach;  // hit distance over the distance to the box boundary
   TraceCounters counters;
-  for (int a = 0; a < 3; ++a)
-    for (float s : {-1.0f, 1.0f}) {
-      Ray r;
-      r.org = centre;
-      r.dir = axis_vector(a, s);
-      hits += tracer.any(r, counters) ? 1 : 0;
-    }
-  for (int i = 0; i < 8; ++i) {
+  // `dir` reaches the box boundary at t = boundary_t.
+  auto probe = [&](const Vec3& dir, float boundary_t) {
+    if (dir == Vec3(0.0f) || !(boundary_t > 0.0f)) return;
     Ray r;
     r.org = centre;
-    r.dir = Vec3((i & 1) ? ext.x : -ext.x, (i & 2) ? ext.y : -ext.y, (i & 4) ? ext.z : -ext.z);
-    if (r.dir == Vec3(0.0f)) continue;
-    hits += tracer.any(r, counters) ? 1 : 0;
-  }
+    r.dir = dir;
+    const Hit h = tracer.closest(r, counters);
+    if (!h.hit()) return;
+    ++hits;
+    reach.push_back(h.t / boundary_t);
+    const Triangle t = mesh.triangle(h.triangle_id);
+    front += dot(cross(t.v1 - t.v0, t.v2 - t.v0), dir) < 0.0f ? 1 : 0;
+  };
+  for (int a = 0; a < 3; ++a)
+    for (float s : {-1.0f, 1.0f}) probe(axis_vector(a, s), 0.5f * ext[a]);
+  for (int i = 0; i < 8; ++i)
+    probe(Vec3((i & 1) ? ext.x : -ext.x, (i & 2) ? ext.y : -ext.y, (i & 4) ? ext.z : -ext.z), 0.5f);
+  std::sort(reach.begin(), reach.end());
+  const float median_reach = reach.empty() ? 0.0f : reach[reach.size() / 2];
 
   Camera cam;
   cam.width = width;
   cam.height = height;
   cam.up = axis_vector(up_axis);
-  if (hits >= 12) {
+  // Enclosed, by surfaces facing the centre (walls seen from inside a room, not the back
+  // faces of a solid the centre lies in, such as a statue), and with room to look: the
+  // median probe travels at least 30% of the way to the box boundary (a solid with
+  // inward-facing triangles is hit close to the centre).
+  if (hits >= 12 && 2 * front > hits && median_reach >= 0.3f) {
     cam.position = centre;
     cam.target = centre + axis_vector(long_axis, std::max(ext[long_axis], 1e-6f));
     return cam;
   }
-  const float radius = std::max(0.5f * length(ext), 1e-6f);
-  const float half_fov = 0.5f * cam.fov_degrees * std::numbers::pi_v<float> / 180.0f;
-  const float distance = radius / std::sin(half_fov);
+  // Frame the box: its extent along up fills the height, along the long axis the width,
+  // with a 10% margin, measured from the box face nearest the camera.
+  const float tan_half = std::tan(0.5f * cam.fov_degrees * std::numbers::pi_v<float> / 180.0f);
+  const float aspect = float(width) / float(std::max<uint32_t>(height, 1));
+  const float fit = std::max(0.5f * ext[up_axis] / tan_half, 0.5f * ext[long_axis] / (tan_half * aspect));
+  const float distance = std::max(0.5f * ext[short_axis] + 1.1f * fit, 1e-6f);
   cam.target = centre;
-  cam.position = centre + axis_vector(short_axis, distance) + cam.up * (0.25f * radius);
+  cam.position = centre + axis_vector(short_axis, distance);
   return cam;
 }
 

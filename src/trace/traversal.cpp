@@ -1,7 +1,11 @@
 // Single-ray traversal over the finalized tree and the watertight triangle test.
 #include "bvhopt/traversal.h"
 
+// SSE is part of x86-64; elsewhere the same arithmetic runs lane by lane.
+#if defined(__SSE2__) || defined(_M_X64)
 #include <xmmintrin.h>
+#define BVHOPT_TRACE_SSE 1
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -28,17 +32,20 @@ struct StackEntry {
 
 constexpr size_t kFixedStack = 128;
 
-// Per-ray values of the slab test, broadcast to all four lanes.
+// Per-ray values of the slab test.
 struct SlabRay {
-  __m128 ox, oy, oz, ix, iy, iz;
+  float org[3];
+  float inv[3];
   int neg[3];  // direction negative on the axis
+#ifdef BVHOPT_TRACE_SSE
+  __m128 ox, oy, oz, ix, iy, iz;  // broadcast to all four lanes
+#endif
 };
 
 SlabRay make_slab_ray(const Ray& r) {
   SlabRay s;
   const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
   const float biggest = std::max({std::fabs(d[0]), std::fabs(d[1]), std::fabs(d[2])});
-  float inv[3];
   for (int a = 0; a < 3; ++a) {
     // A zero component would give an infinite inverse and 0 * inf = NaN for an origin on
     // a slab. Components below 1e-20 of the largest are raised to that size (sign kept):
@@ -46,22 +53,29 @@ SlabRay make_slab_ray(const Ray& r) {
     // box padding, and every product stays finite.
     float c = d[a];
     if (std::fabs(c) < biggest * 1e-20f) c = std::signbit(c) ? -biggest * 1e-20f : biggest * 1e-20f;
-    inv[a] = 1.0f / c;
+    s.inv[a] = 1.0f / c;
     s.neg[a] = std::signbit(d[a]) ? 1 : 0;
   }
-  s.ox = _mm_set1_ps(r.org.x);
-  s.oy = _mm_set1_ps(r.org.y);
-  s.oz = _mm_set1_ps(r.org.z);
-  s.ix = _mm_set1_ps(inv[0]);
-  s.iy = _mm_set1_ps(inv[1]);
-  s.iz = _mm_set1_ps(inv[2]);
+  s.org[0] = r.org.x;
+  s.org[1] = r.org.y;
+  s.org[2] = r.org.z;
+#ifdef BVHOPT_TRACE_SSE
+  s.ox = _mm_set1_ps(s.org[0]);
+  s.oy = _mm_set1_ps(s.org[1]);
+  s.oz = _mm_set1_ps(s.org[2]);
+  s.ix = _mm_set1_ps(s.inv[0]);
+  s.iy = _mm_set1_ps(s.inv[1]);
+  s.iz = _mm_set1_ps(s.inv[2]);
+#endif
   return s;
 }
 
 // Both children's boxes against the ray within [tmin, limit]: bit i of the result is set when
 // child i is entered, tnear[i] its entry distance. Lanes [lo0, lo1, hi0, hi1]: swapping halves
 // pairs each bound with its opposite, and min/max sort entry from exit whatever the sign.
-inline int intersect_children(const TraceNode& n, const SlabRay& r, __m128 tmin, float limit, float tnear[4]) {
+#ifdef BVHOPT_TRACE_SSE
+inline int intersect_children(const TraceNode& n, const SlabRay& r, float tmin_s, float limit, float tnear[4]) {
+  const __m128 tmin = _mm_set1_ps(tmin_s);
   const __m128 tx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.x), r.ox), r.ix);
   const __m128 ty = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.y), r.oy), r.iy);
   const __m128 tz = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.z), r.oz), r.iz);
@@ -74,6 +88,26 @@ inline int intersect_children(const TraceNode& n, const SlabRay& r, __m128 tmin,
   _mm_storeu_ps(tnear, near);
   return _mm_movemask_ps(_mm_cmple_ps(near, far)) & 3;
 }
+inline void prefetch_node(const TraceNode* n) { _mm_prefetch(reinterpret_cast<const char*>(n), _MM_HINT_T0); }
+#else
+inline int intersect_children(const TraceNode& n, const SlabRay& r, float tmin, float limit, float tnear[4]) {
+  const float* b[3] = {n.x, n.y, n.z};
+  int mask = 0;
+  for (int c = 0; c < 2; ++c) {
+    float lo = tmin, hi = limit;
+    for (int a = 0; a < 3; ++a) {
+      const float t0 = (b[a][c] - r.org[a]) * r.inv[a];
+      const float t1 = (b[a][c + 2] - r.org[a]) * r.inv[a];
+      lo = std::max(lo, std::min(t0, t1));
+      hi = std::min(hi, std::max(t0, t1));
+    }
+    tnear[c] = lo;
+    mask |= lo <= hi * kExitScale ? (1 << c) : 0;
+  }
+  return mask;
+}
+inline void prefetch_node(const TraceNode*) {}
+#endif
 
 }  // namespace
 
@@ -225,7 +259,7 @@ bool Tracer::traverse(const Ray& ray, Hit& hit, TraceCounters& counters, void* s
   StackEntry* stack = static_cast<StackEntry*>(stack_memory);
   const SlabRay sr = make_slab_ray(ray);
   WatertightRay wr(ray);
-  const __m128 tmin = _mm_set1_ps(ray.tmin);
+  const float tmin = ray.tmin;
   // hit.t is the exclusive upper bound of an acceptable t; it starts just above tmax so a
   // hit at exactly tmax counts.
   hit.t = ray.tmax < kInf ? std::nextafter(ray.tmax, kInf) : kInf;
@@ -279,7 +313,7 @@ bool Tracer::traverse(const Ray& ray, Hit& hit, TraceCounters& counters, void* s
       ++sp;
       node = n.child[near];
       // The far child is usually visited soon; start its cache line on the way.
-      _mm_prefetch(reinterpret_cast<const char*>(nodes + n.child[1 - near]), _MM_HINT_T0);
+      prefetch_node(nodes + n.child[1 - near]);
       continue;
     }
     if (go != 0) {
