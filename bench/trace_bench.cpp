@@ -32,6 +32,7 @@
 #include <functional>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -171,6 +172,19 @@ double pearson(const std::vector<double>& x, const std::vector<double>& y) {
     syy += (y[i] - my) * (y[i] - my);
   }
   return sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : std::nan("");
+}
+
+// Views for shared scenes the default camera rule frames badly: classroom.obj sits in
+// a 220 x 220 ground plane, so the default exterior camera sees a speck. Others use
+// default_camera.
+std::optional<Camera> bench_view(const std::string& scene) {
+  if (scene == "classroom.obj") {
+    Camera c;
+    c.position = Vec3(3.5f, 1.6f, 3.5f);  // inside the room, by the back wall
+    c.target = Vec3(-2.0f, 1.0f, -3.0f);
+    return c;
+  }
+  return std::nullopt;
 }
 
 #ifdef BVHOPT_HAVE_EMBREE
@@ -363,6 +377,7 @@ int run(const Options& opt) {
       cfg.kind = kind;
       cfg.seed = 1;
       cfg.count = kind == RayKind::primary ? 0 : opt.count;  // primary: 1024 x 768
+      cfg.camera = bench_view(scene);
       const RaySet set = make_ray_set(mesh, *trees[0].tracer, cfg);
       const std::vector<Ray>& rays = set.rays;
 

@@ -1,13 +1,23 @@
-// bvhopt demo: the main job. Every builder (and, as they land, every optimizer) on the
-// built-in scene, in one table, so a new user sees what the library does in one command.
+// bvhopt demo: the main job. Every builder and every optimizer on the built-in scene, each
+// tree judged by the three numbers users care about (cost, time to get it, rays per second),
+// plus heat maps of the unoptimized and the best tree, so a new user sees the whole library
+// at work in one command.
+#include <filesystem>
 #include <iomanip>
 #include <iostream>
-#include <sstream>
 #include <vector>
 
 #include "bvhopt/build.h"
+#include "bvhopt/compaction.h"
+#include "bvhopt/finalize.h"
+#include "bvhopt/images.h"
+#include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/ray_measure.h"
+#include "bvhopt/ray_sets.h"
 #include "bvhopt/scene.h"
 #include "bvhopt/stats.h"
+#include "bvhopt/traversal.h"
+#include "bvhopt/tree_rotations.h"
 #include "cli_common.h"
 #include "commands.h"
 
@@ -16,17 +26,22 @@ namespace {
 
 struct DemoRow {
   std::string method;
-  double seconds = 0.0;
+  double seconds = 0.0;  // build, or build + optimization for the optimized trees
   TreeStats stats;
+  double primary_mrays = 0.0;
+  double random_mrays = 0.0;
 };
 
 void print_table(const std::vector<DemoRow>& rows) {
-  std::cout << std::left << std::setw(26) << "method" << std::right << std::setw(11) << "time ms" << std::setw(10)
-            << "cost" << std::setw(10) << "ocost" << std::setw(10) << "nodes" << std::setw(7) << "depth" << "\n";
+  std::cout << std::left << std::setw(25) << "method" << std::right << std::setw(10) << "time ms" << std::setw(9)
+            << "cost" << std::setw(9) << "ocost" << std::setw(9) << "nodes" << std::setw(7) << "depth"
+            << std::setw(14) << "primary Mr/s" << std::setw(13) << "random Mr/s" << "\n";
   for (const DemoRow& r : rows)
-    std::cout << std::left << std::setw(26) << r.method << std::right << std::setw(11) << format_double(r.seconds * 1e3, 1)
-              << std::setw(10) << format_double(r.stats.cost, 2) << std::setw(10) << format_double(r.stats.ocost, 2)
-              << std::setw(10) << r.stats.nodes << std::setw(7) << r.stats.max_depth << "\n";
+    std::cout << std::left << std::setw(25) << r.method << std::right << std::setw(10)
+              << format_double(r.seconds * 1e3, 1) << std::setw(9) << format_double(r.stats.cost, 2) << std::setw(9)
+              << format_double(r.stats.ocost, 2) << std::setw(9) << r.stats.nodes << std::setw(7)
+              << r.stats.max_depth << std::setw(14) << format_double(r.primary_mrays, 2) << std::setw(13)
+              << format_double(r.random_mrays, 2) << "\n";
 }
 
 }  // namespace
@@ -37,19 +52,26 @@ void register_demo_command(CLI::App& app) {
     uint64_t seed = 1;
     ThreadsOption threads;
     CostOption cost;
+    std::string images = "bvhopt-demo";
+    bool quick = false;
     bool json = false;
   };
   auto opt = std::make_shared<Options>();
-  CLI::App* cmd = app.add_subcommand("demo", "Build the built-in scene with every builder and print a table");
+  CLI::App* cmd = app.add_subcommand(
+      "demo", "Every builder and optimizer on the built-in scene: cost, time and rays per second, plus heat maps");
   cmd->add_option("--triangles", opt->triangles, "Size of the built-in scene")
       ->check(CLI::Range(uint64_t{100}, uint64_t{100'000'000}))
       ->capture_default_str();
-  cmd->add_option("--seed", opt->seed, "Seed of the built-in scene")->capture_default_str();
+  cmd->add_option("--seed", opt->seed, "Seed of the built-in scene and of the optimizers")->capture_default_str();
+  cmd->add_option("--images", opt->images, "Folder for the heat maps of the unoptimized and the best tree")
+      ->capture_default_str();
+  cmd->add_flag("--quick", opt->quick, "Shorter annealing schedule (250 passes instead of 1250)");
   opt->cost.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print JSON");
   cmd->callback([opt] {
     auto threads = opt->threads.apply();
+    const CostModel model = opt->cost.model();
     ProgressLine progress;
     progress.update("generating the built-in scene", true);
     Stopwatch scene_clock;
@@ -58,35 +80,140 @@ void register_demo_command(CLI::App& app) {
     double scene_s = scene_clock.seconds();
     PrimitiveRefs refs = make_references(mesh);
 
+    // One ray set per kind, made once against the first tree, so every tree traces the same rays.
+    std::vector<Ray> primary_rays, random_rays;
+    uint32_t image_w = 0, image_h = 0;
+    std::vector<TraceCounters> unoptimized_steps;
+    struct Best {
+      double cost = 1e300;
+      std::string method;
+      std::vector<TraceCounters> steps;
+    } best;
+
     std::vector<DemoRow> rows;
+    auto measure = [&](DemoRow row, const Bvh& bvh) {
+      row.stats = compute_stats(bvh, model);
+      progress.update("tracing: " + row.method, true);
+      Tracer tracer(finalize(bvh, refs), mesh);
+      if (primary_rays.empty()) {
+        RaySetConfig config;
+        config.kind = RayKind::primary;
+        RaySet set = make_ray_set(mesh, tracer, config);
+        image_w = set.width;
+        image_h = set.height;
+        primary_rays = std::move(set.rays);
+        config.kind = RayKind::random;
+        config.seed = opt->seed;
+        config.count = 500'000;
+        random_rays = make_ray_set(mesh, tracer, config).rays;
+      }
+      MeasureOptions mo;
+      mo.repeats = 3;
+      row.primary_mrays = measure_rays(tracer, primary_rays, RayQuery::closest, mo).rays_per_second * 1e-6;
+      row.random_mrays = measure_rays(tracer, random_rays, RayQuery::closest, mo).rays_per_second * 1e-6;
+      if (row.method == "sweep" || row.stats.cost < best.cost) {
+        std::vector<Hit> hits;
+        std::vector<TraceCounters> counters;
+        trace_rays(tracer, primary_rays, RayQuery::closest, hits, &counters);
+        if (row.method == "sweep") unoptimized_steps = counters;
+        if (row.stats.cost < best.cost) best = {row.stats.cost, row.method, std::move(counters)};
+      }
+      rows.push_back(std::move(row));
+    };
+
+    Bvh sweep;
+    double sweep_s = 0.0;
     for (BuilderKind kind : all_builders()) {
       progress.update("building: " + std::string(builder_name(kind)), true);
       BuildOptions options;
       options.kind = kind;
-      options.cost = opt->cost.model();
+      options.cost = model;
       Stopwatch clock;
       Bvh bvh = build_bvh(refs, options);
       double s = clock.seconds();
-      rows.push_back({std::string(builder_name(kind)), s, compute_stats(bvh, options.cost)});
+      if (kind == BuilderKind::sweep_sah) {
+        sweep = bvh;
+        sweep_s = s;
+      }
+      measure({std::string(builder_name(kind)), s}, bvh);
+    }
+
+    // The optimizers all start from the sweep SAH tree with one reference per leaf; their
+    // time column is the build plus the optimization.
+    auto on_pass = [&](const std::string& name) {
+      return [&progress, name](const PassRecord& p) {
+        progress.update(name + ": pass " + std::to_string(p.pass) + ", cost " + format_double(p.cost, 3) +
+                        ", best " + format_double(p.best_cost, 3) + ", " + format_double(p.seconds, 1) + " s");
+      };
+    };
+    {
+      Bvh bvh = sweep;
+      HillClimbConfig config;
+      config.cost = model;
+      config.on_pass = on_pass("sweep+hill-climb");
+      OptimizeReport r = hill_climb(bvh, config);
+      measure({"sweep+hill-climb", sweep_s + r.seconds}, bvh);
+    }
+    {
+      Bvh bvh = sweep;
+      AnnealConfig config;
+      config.cost = model;
+      config.seed = opt->seed;
+      if (opt->quick) config.schedule_passes = 250;
+      config.on_pass = on_pass("sweep+anneal");
+      OptimizeReport r = anneal(bvh, config);
+      measure({"sweep+anneal", sweep_s + r.seconds}, bvh);
+    }
+    {
+      Bvh bvh = sweep;
+      InsertionConfig config;
+      config.cost = model;
+      config.seed = opt->seed;
+      OptimizeReport r = optimize_insertion(bvh, config, on_pass("sweep+insertion"));
+      measure({"sweep+insertion", sweep_s + r.seconds}, bvh);
+      Stopwatch clock;
+      CompactionConfig cc;
+      cc.cost = model;
+      compact_leaves(bvh, cc);
+      measure({"sweep+insertion+compact", sweep_s + r.seconds + clock.seconds()}, bvh);
     }
     progress.finish();
 
+    std::filesystem::path folder = opt->images;
+    std::filesystem::create_directories(folder);
+    const std::filesystem::path unopt_png = folder / "heatmap-sweep.png";
+    const std::filesystem::path best_png = folder / "heatmap-best.png";
+    write_png(unopt_png, heatmap_image(unoptimized_steps, image_w, image_h));
+    write_png(best_png, heatmap_image(best.steps, image_w, image_h));
+
     if (opt->json) {
-      nlohmann::json j = {{"scene", mesh.name}, {"triangles", mesh.triangle_count()}, {"threads", opt->threads.effective()}};
+      nlohmann::json j = {{"scene", mesh.name},
+                          {"triangles", mesh.triangle_count()},
+                          {"threads", opt->threads.effective()},
+                          {"c_t", model.traversal},
+                          {"c_i", model.intersection},
+                          {"heatmaps", {unopt_png.string(), best_png.string()}}};
       for (const DemoRow& r : rows)
         j["rows"].push_back({{"method", r.method},
                              {"seconds", r.seconds},
                              {"cost", r.stats.cost},
                              {"ocost", r.stats.ocost},
                              {"nodes", r.stats.nodes},
-                             {"max_depth", r.stats.max_depth}});
+                             {"max_depth", r.stats.max_depth},
+                             {"primary_mrays_per_s", r.primary_mrays},
+                             {"random_mrays_per_s", r.random_mrays}});
       print_json(j);
       return;
     }
     std::cout << "bvhopt demo: built-in scene " << mesh.name << ", " << mesh.triangle_count() << " triangles (made in "
               << format_double(scene_s, 2) << " s), " << opt->threads.effective() << " threads, c_T "
-              << opt->cost.traversal << ", c_I " << opt->cost.intersection << ", leaf size 1\n\n";
+              << model.traversal << ", c_I " << model.intersection << "\n"
+              << "optimizers start from the sweep SAH tree (one triangle per leaf); their time includes the build\n"
+              << "rays: " << primary_rays.size() << " primary (" << image_w << "x" << image_h << "), "
+              << random_rays.size() << " random; Mrays/s on " << opt->threads.effective() << " threads\n\n";
     print_table(rows);
+    std::cout << "\nheat maps (traversal steps per pixel, 0..100): " << unopt_png.string() << " (sweep), "
+              << best_png.string() << " (" << best.method << ")\n";
   });
 }
 

@@ -13,7 +13,11 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", "bvhopt 0.1.0");
   bvhopt::cli::register_info_command(app);
   bvhopt::cli::register_build_command(app);
+  bvhopt::cli::register_optimize_command(app);
+  bvhopt::cli::register_compact_command(app);
   bvhopt::cli::register_stats_command(app);
+  bvhopt::cli::register_trace_command(app);
+  bvhopt::cli::register_render_command(app);
   bvhopt::cli::register_demo_command(app);
   bvhopt::cli::register_experiment_command(app);
   try {
