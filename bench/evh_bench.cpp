@@ -5,7 +5,7 @@
 //
 //   evh_bench [--scenes DIR] [--scene FILE]... [--json FILE] [--quick]
 //             [--rays N] [--repeats R] [--leaf L] [--t T] [--fig5-scene FILE]
-//             [--no-fig4] [--no-fig5]
+//             [--no-fig4] [--no-fig5] [--no-table]
 //
 // The baseline is the best builder we have without subdivision: the exact sweep SAH over one
 // reference per triangle. EVH is the same builder over the subdivided references followed by
@@ -57,6 +57,7 @@ struct Options {
   bool quick = false;
   bool fig4 = true;
   bool fig5 = true;
+  bool table = true;  // the main table and Table 1
   uint64_t rays = 1u << 18;  // per ray kind; Figures 4 and 5 trace a quarter of this per point
   int repeats = 3;
   uint32_t leaf = 4;
@@ -81,6 +82,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--quick") o.quick = true;
     else if (a == "--no-fig4") o.fig4 = false;
     else if (a == "--no-fig5") o.fig5 = false;
+    else if (a == "--no-table") o.table = false;
     else if (a == "--rays") o.rays = std::stoull(value()), rays_set = true;
     else if (a == "--repeats") o.repeats = std::max(1, std::stoi(value())), repeats_set = true;
     else if (a == "--leaf") o.leaf = static_cast<uint32_t>(std::max(1, std::stoi(value())));
@@ -88,7 +90,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--help" || a == "-h") {
       std::cout << "evh_bench [--scenes DIR] [--scene FILE]... [--json FILE] [--quick]\n"
                    "          [--rays N] [--repeats R] [--leaf L] [--t T] [--fig5-scene FILE]\n"
-                   "          [--no-fig4] [--no-fig5]\n";
+                   "          [--no-fig4] [--no-fig5] [--no-table]\n";
       std::exit(0);
     } else {
       throw Error("evh_bench: unknown option '" + a + "'");
@@ -290,6 +292,7 @@ int run(const Options& o) {
   std::cout << "evh_bench: " << threads << " threads, t = " << o.t << ", leaf <= " << o.leaf << ", " << o.rays
             << " primary + " << o.rays << " random rays, median of " << o.repeats << "\n\n";
 
+  if (o.table) {
   // ---- Main table: every scene, unrotated and rotated (30, 30, 0).
   std::printf("%-20s %-3s %7s %8s %8s %9s %6s %6s %7s %7s %7s %7s %6s %11s %11s\n", "scene", "rot", "tris", "refs/tri",
               "subdiv", "sweep", "s/b", "s/b 1t", "SAH", "SAH evh", "Mray/s", "evh", "speed", "tests/ray", "steps/ray");
@@ -428,6 +431,8 @@ int run(const Options& o) {
     }
   }
   out["table1"] = table1;
+
+  }
 
   // ---- Figure 4: t from 8 to 20 on the rotated architectural scenes.
   if (o.fig4) {

@@ -53,6 +53,7 @@ void register_demo_command(CLI::App& app) {
     ThreadsOption threads;
     CostOption cost;
     std::string images = "bvhopt-demo";
+    uint64_t rays = 0;
     bool quick = false;
     bool json = false;
   };
@@ -65,6 +66,7 @@ void register_demo_command(CLI::App& app) {
   cmd->add_option("--seed", opt->seed, "Seed of the built-in scene and of the optimizers")->capture_default_str();
   cmd->add_option("--images", opt->images, "Folder for the heat maps of the unoptimized and the best tree")
       ->capture_default_str();
+  cmd->add_option("--rays", opt->rays, "Rays per set (default: 1024x768 primary rays and 500,000 random rays)");
   cmd->add_flag("--quick", opt->quick, "Shorter annealing schedule (250 passes instead of 1250)");
   opt->cost.add_to(cmd);
   opt->threads.add_to(cmd);
@@ -98,13 +100,14 @@ void register_demo_command(CLI::App& app) {
       if (primary_rays.empty()) {
         RaySetConfig config;
         config.kind = RayKind::primary;
+        config.count = opt->rays;
         RaySet set = make_ray_set(mesh, tracer, config);
         image_w = set.width;
         image_h = set.height;
         primary_rays = std::move(set.rays);
         config.kind = RayKind::random;
         config.seed = opt->seed;
-        config.count = 500'000;
+        config.count = opt->rays != 0 ? opt->rays : 500'000;
         random_rays = make_ray_set(mesh, tracer, config).rays;
       }
       MeasureOptions mo;

@@ -104,8 +104,8 @@ TEST_F(Cli, FailedWriteLeavesNothingBehind) {
   EXPECT_NE(r.err.find("out.bvh"), std::string::npos) << r.err;
 }
 
-TEST_F(Cli, DemoPrintsARowPerBuilder) {
-  CliRun r = run("demo --triangles 5000 --json");
+TEST_F(Cli, DemoPrintsARowPerMethodAndWritesHeatMaps) {
+  CliRun r = run("demo --triangles 5000 --quick --rays 20000 --json --images " + (dir_ / "images").string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   auto j = nlohmann::json::parse(r.out);
   std::set<std::string> methods;
@@ -114,7 +114,12 @@ TEST_F(Cli, DemoPrintsARowPerBuilder) {
     EXPECT_GT(row["cost"].get<double>(), 0.0);
     EXPECT_LE(row["ocost"].get<double>(), row["cost"].get<double>() + 1e-9);
   }
-  for (const char* m : {"sweep", "binned", "spatial-median", "object-median"}) EXPECT_TRUE(methods.count(m)) << m;
+  for (const char* m : {"sweep", "binned", "spatial-median", "object-median", "sweep+hill-climb", "sweep+anneal",
+                        "sweep+insertion", "sweep+insertion+compact"})
+    EXPECT_TRUE(methods.count(m)) << m;
+  for (const auto& row : j["rows"]) EXPECT_GT(row["primary_mrays_per_s"].get<double>(), 0.0);
+  EXPECT_TRUE(fs::exists(dir_ / "images" / "heatmap-sweep.png"));
+  EXPECT_TRUE(fs::exists(dir_ / "images" / "heatmap-best.png"));
 }
 
 }  // namespace
