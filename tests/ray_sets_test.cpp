@@ -13,6 +13,8 @@
 #include "bvhopt/error.h"
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/references.h"
+#include "bvhopt/scene.h"
+#include "bvhopt/finalize.h"
 #include "bvhopt/traversal.h"
 #include "test_support.h"
 
@@ -153,6 +155,29 @@ TEST(RaySets, InteriorCameraStandsInsideLookingAlongTheLongerAxis) {
   Box box;
   for (size_t v = 0; v < s.mesh.vertex_count(); ++v) box.extend(s.mesh.vertex(v));
   EXPECT_FALSE(box.contains(default_camera(s.mesh, t2).position));
+}
+
+// The built-in scene is an interior whose surfaces face inwards, so the default camera
+// stands inside the hall, where its users' scenes put it, rather than framing it from outside.
+TEST(RaySets, DefaultCameraStandsInsideTheBuiltinHall) {
+  for (uint64_t seed : {1, 2}) {
+    Mesh mesh = load_scene("builtin:atrium?triangles=60000&seed=" + std::to_string(seed));
+    PrimitiveRefs refs = make_references(mesh);
+    Bvh bvh = build_bvh(refs);
+    Tracer tracer(finalize(bvh, refs), mesh);
+    Camera cam = default_camera(mesh, tracer);
+    Box bounds = describe(mesh).bounds;
+    EXPECT_TRUE(bounds.contains(cam.position)) << "seed " << seed;
+    EXPECT_LT(length(cam.position - bounds.center()), 1e-3f * length(bounds.extent())) << "seed " << seed;
+    RaySetConfig config;
+    config.kind = RayKind::primary;
+    config.count = 20000;
+    RaySet set = make_ray_set(mesh, tracer, config);
+    size_t hits = 0;
+    TraceCounters counters;
+    for (const Ray& r : set.rays) hits += tracer.closest(r, counters).hit();
+    EXPECT_EQ(hits, set.rays.size()) << "an enclosed hall: every primary ray hits something";
+  }
 }
 
 TEST(RaySets, FileRoundTripIsExact) {

@@ -1,4 +1,5 @@
-// Everything public, in pipeline order.
+// Everything public, in pipeline order:
+// scene -> primitive references (optionally subdivided) -> build -> optimize -> finalize -> trace / measure / save.
 #pragma once
 
 #include "bvhopt/error.h"
@@ -7,11 +8,28 @@
 #include "bvhopt/triangle.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/scene.h"
+
 #include "bvhopt/references.h"
+#include "bvhopt/edge_volume_subdivision.h"
+
 #include "bvhopt/bvh.h"
 #include "bvhopt/build.h"
+
+#include "bvhopt/optimize_report.h"
+#include "bvhopt/tree_rotations.h"
+#include "bvhopt/insertion_optimizer.h"
+
+#include "bvhopt/compaction.h"
+#include "bvhopt/leaf_dedup.h"
+#include "bvhopt/finalize.h"
+
 #include "bvhopt/cost.h"
 #include "bvhopt/stats.h"
 #include "bvhopt/validate.h"
-#include "bvhopt/finalize.h"
 #include "bvhopt/bvh_file.h"
+
+#include "bvhopt/ray.h"
+#include "bvhopt/ray_sets.h"
+#include "bvhopt/traversal.h"
+#include "bvhopt/ray_measure.h"
+#include "bvhopt/images.h"

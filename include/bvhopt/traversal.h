@@ -26,7 +26,7 @@ enum class ChildOrder : uint8_t {
 
 // Work counters of one ray, as the heat maps and the statistics report them.
 struct TraceCounters {
-  uint32_t steps = 0;           // nodes visited whose box the ray entered (inner and leaf)
+  uint32_t steps = 0;           // inner nodes visited (the root always) + leaves tested
   uint32_t triangle_tests = 0;  // ray-triangle tests
 };
 
@@ -85,12 +85,7 @@ class Tracer {
   bool traverse(const Ray& ray, Hit& hit, TraceCounters& counters, void* stack) const;
 
   std::vector<TraceNode> nodes_;
-  // Per leaf entry the triangle's v0, v1, v2 (9 floats), padded to one 64-byte cache line so
-  // a leaf test never touches two lines.
-  struct alignas(64) TriangleRecord {
-    float v[16];
-  };
-  std::vector<TriangleRecord> vertices_;
+  std::vector<float> vertices_;  // 9 floats per leaf entry
   std::vector<uint32_t> ids_;
   size_t mesh_triangles_ = 0;
   size_t depth_ = 0;  // deepest node; beyond the fixed C-stack size a heap stack is used

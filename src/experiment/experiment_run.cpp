@@ -417,7 +417,18 @@ EvhTrace trace_evh_tree(const Mesh& mesh, const PrimitiveRefs& refs, const RaySe
   return r;
 }
 
-RaySet evh_primary_rays(const Mesh& mesh, const ExperimentConfig& cfg, std::optional<Camera> camera = {}) {
+// With a camera given, primary rays do not depend on the tracer (it only places default
+// cameras), so the rotation frames reuse one.
+RaySet evh_primary_rays(const Mesh& mesh, const ExperimentConfig& cfg, const Camera& camera, const Tracer& tracer) {
+  RaySetConfig rc;
+  rc.kind = RayKind::primary;
+  rc.seed = cfg.seed;
+  rc.count = cfg.evh_rays;
+  rc.camera = camera;
+  return make_ray_set(mesh, tracer, rc);
+}
+
+RaySet evh_primary_rays(const Mesh& mesh, const ExperimentConfig& cfg) {
   PrimitiveRefs refs = make_references(mesh);
   BuildOptions bo;
   bo.kind = BuilderKind::binned_sah;
@@ -427,7 +438,6 @@ RaySet evh_primary_rays(const Mesh& mesh, const ExperimentConfig& cfg, std::opti
   rc.kind = RayKind::primary;
   rc.seed = cfg.seed;
   rc.count = cfg.evh_rays;
-  rc.camera = camera;
   return make_ray_set(mesh, tracer, rc);
 }
 
@@ -503,7 +513,7 @@ json run_rotation(Runner& run, const Mesh& mesh) {
     }
     Mesh m = mesh;
     rotate_mesh(m, Vec3{angle[0], angle[1], angle[2]});
-    const RaySet rays = evh_primary_rays(m, cfg, camera);
+    const RaySet rays = evh_primary_rays(m, cfg, camera, tracer0);
     EvhTrace base = trace_evh_tree(m, make_references(m), rays, cfg.repeats);
     EdgeVolumeConfig ec;
     ec.t = cfg.rotation_t;

@@ -234,7 +234,9 @@ struct Generator {
     const float L = hall.length, W = hall.outer_half, N = hall.nave_half, H = hall.eaves;
     // Ground floor in large stone slabs (2.5 m): few, large triangles.
     int nx = std::max(1, static_cast<int>(std::lround(L / 2.5f)));
-    out.grid({0, 0, -W}, {L, 0, 0}, {0, 0, 2 * W}, nx, 12);
+    // Surfaces face the inside of the hall (grid normals are du x dv), as modelled interiors
+    // do, so that front faces mean "seen from inside".
+    out.grid({0, 0, -W}, {0, 0, 2 * W}, {L, 0, 0}, 12, nx);
     // Gallery floors over both aisles: slabs one bay long, with their undersides.
     for (int side = -1; side <= 1; side += 2) {
       float z0 = side < 0 ? -W : N, z1 = side < 0 ? -N : W;
@@ -244,18 +246,27 @@ struct Generator {
       out.grid({0, H, z0}, {L, 0, 0}, {0, 0, z1 - z0}, hall.bays, 1);
       // Outer wall: one panel per bay and storey, the largest triangles of the scene.
       float zw = side * W;
-      out.grid({0, 0, zw}, {L, 0, 0}, {0, H, 0}, hall.bays, 2);
+      if (side < 0)
+        out.grid({0, 0, zw}, {L, 0, 0}, {0, H, 0}, hall.bays, 2);
+      else
+        out.grid({0, 0, zw}, {0, H, 0}, {L, 0, 0}, 2, hall.bays);
     }
     // End walls, and the lunettes under the vault as fans of long triangles.
     for (int end = 0; end <= 1; ++end) {
       float x = end * L;
-      out.grid({x, 0, -W}, {0, 0, 2 * W}, {0, H, 0}, 6, 2);
+      if (end == 0)
+        out.grid({x, 0, -W}, {0, H, 0}, {0, 0, 2 * W}, 2, 6);
+      else
+        out.grid({x, 0, -W}, {0, 0, 2 * W}, {0, H, 0}, 6, 2);
       uint32_t c = out.vertex({x, H, 0});
       uint32_t prev = out.vertex({x, H, N});
       for (int i = 1; i <= detail.vault_segments; ++i) {
         float a = kPi * i / detail.vault_segments;
         uint32_t v = out.vertex({x, H + N * std::sin(a), N * std::cos(a)});
-        out.tri(c, prev, v);
+        if (end == 0)
+          out.tri(c, v, prev);
+        else
+          out.tri(c, prev, v);
         prev = v;
       }
     }

@@ -240,21 +240,21 @@ Tracer::Tracer(const FlatBvh& bvh, const Mesh& mesh) : mesh_triangles_(mesh.tria
   }
 
   ids_ = bvh.triangle_ids;
-  vertices_.assign(entries, TriangleRecord{});
+  vertices_.resize(9 * entries);
   for (size_t e = 0; e < entries; ++e) {
     if (ids_[e] >= mesh_triangles_)
       throw Error("tracer: leaf entry " + std::to_string(e) + ": triangle id " + std::to_string(ids_[e]) +
                   " out of range (mesh " + mesh.name + " has " + std::to_string(mesh_triangles_) + " triangles)");
     const Triangle t = mesh.triangle(ids_[e]);
     const float v[9] = {t.v0.x, t.v0.y, t.v0.z, t.v1.x, t.v1.y, t.v1.z, t.v2.x, t.v2.y, t.v2.z};
-    std::copy(v, v + 9, vertices_[e].v);
+    std::copy(v, v + 9, vertices_.begin() + 9 * e);
   }
 }
 
 template <ChildOrder kOrder, bool kAny>
 bool Tracer::traverse(const Ray& ray, Hit& hit, TraceCounters& counters, void* stack_memory) const {
   const TraceNode* nodes = nodes_.data();
-  const TriangleRecord* verts = vertices_.data();
+  const float* verts = vertices_.data();
   const uint32_t* ids = ids_.data();
   StackEntry* stack = static_cast<StackEntry*>(stack_memory);
   const SlabRay sr = make_slab_ray(ray);
@@ -287,7 +287,7 @@ bool Tracer::traverse(const Ray& ray, Hit& hit, TraceCounters& counters, void* s
         const uint32_t end = first + (c == 0 ? count0 : count1);
         tests += end - first;
         for (uint32_t e = first; e < end; ++e) {
-          const float* v = verts[e].v;
+          const float* v = verts + 9 * size_t(e);
           if (watertight_test(wr, v, v + 3, v + 6, hit)) {
             hit.triangle_id = ids[e];
             found = true;
