@@ -139,56 +139,30 @@ void check_input(const Mesh& mesh, const EdgeVolumeConfig& config) {
                 " indices, not a multiple of 3");
 }
 
-// One parallel pass over the triangles: the box of their corners (for V) and the first
-// triangle with an index out of range, if any. Min, max and "first" do not depend on the
-// order the blocks are combined in.
-struct Scan {
-  Box box;
-  size_t first_bad = SIZE_MAX;
-};
-
+// The volume of the scene box: config.scene_box, or the bounds of the mesh's vertices (one
+// contiguous parallel read; min and max do not depend on how the blocks combine).
 double scene_volume(const Mesh& mesh, const EdgeVolumeConfig& config) {
-  const size_t nv = mesh.vertex_count();
-  const uint32_t* idx = mesh.indices.data();
-  const float* pos = mesh.positions.data();
-  const bool need_box = config.scene_box.is_empty();
-  const Scan scan = tbb::parallel_reduce(
-      tbb::blocked_range<size_t>(0, mesh.triangle_count(), 4 * kGrain), Scan{},
-      [&](const tbb::blocked_range<size_t>& r, Scan acc) {
-        for (size_t t = r.begin(); t != r.end(); ++t) {
-          for (int k = 0; k < 3; ++k) {
-            const uint32_t v = idx[3 * t + k];
-            if (v >= nv) {
-              acc.first_bad = std::min(acc.first_bad, t);
-              break;
-            }
-            // Over the triangles' corners, not all positions: unused vertices make no scene.
-            if (need_box) acc.box.extend(Vec3(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]));
-          }
-        }
-        return acc;
-      },
-      [](Scan a, const Scan& b) {
-        a.box.extend(b.box);
-        a.first_bad = std::min(a.first_bad, b.first_bad);
-        return a;
-      });
-  if (scan.first_bad != SIZE_MAX) {
-    const std::string name = mesh.name.empty() ? std::string("mesh") : mesh.name;
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t v = idx[3 * scan.first_bad + k];
-      if (v >= nv)
-        throw Error(name + ": triangle " + std::to_string(scan.first_bad) + ": vertex index " + std::to_string(v) +
-                    " out of range (mesh has " + std::to_string(nv) + " vertices)");
-    }
+  Box box = config.scene_box;
+  if (box.is_empty()) {
+    const float* pos = mesh.positions.data();
+    box = tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, mesh.vertex_count(), 4 * kGrain), Box{},
+        [&](const tbb::blocked_range<size_t>& r, Box acc) {
+          for (size_t v = r.begin(); v != r.end(); ++v) acc.extend(Vec3(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]));
+          return acc;
+        },
+        [](Box x, const Box& y) {
+          x.extend(y);
+          return x;
+        });
   }
-  const Box box = need_box ? scan.box : config.scene_box;
   if (box.is_empty()) return 0.0;
   const Vec3 e = box.extent();
   return static_cast<double>(e.x) * static_cast<double>(e.y) * static_cast<double>(e.z);
 }
 
 struct CountTotals {
+  size_t first_bad = SIZE_MAX;  // first triangle with a vertex index out of range
   uint64_t references = 0;
   size_t subdivided = 0;
   uint32_t deepest = 0;
@@ -200,10 +174,17 @@ struct CountTotals {
 CountTotals count_pass(const Mesh& mesh, const Params& params, std::vector<uint32_t>* counts) {
   const Corners c{mesh.positions.data(), mesh.indices.data()};
   const size_t n = mesh.triangle_count();
+  const size_t nv = mesh.vertex_count();
   return tbb::parallel_reduce(
       tbb::blocked_range<size_t>(0, n, kGrain), CountTotals{},
       [&](const tbb::blocked_range<size_t>& r, CountTotals acc) {
         for (size_t t = r.begin(); t != r.end(); ++t) {
+          // The index check rides on the count pass, which reads the indices anyway.
+          if (c.idx[3 * t] >= nv || c.idx[3 * t + 1] >= nv || c.idx[3 * t + 2] >= nv) {
+            acc.first_bad = std::min(acc.first_bad, t);
+            ++acc.references;
+            continue;
+          }
           const PieceStats s = subdivide_one(c.get(t, 0), c.get(t, 1), c.get(t, 2), params, NoLeaf{}, NoSplit{});
           if (counts) (*counts)[t] = s.pieces;
           acc.references += s.pieces;
@@ -214,6 +195,7 @@ CountTotals count_pass(const Mesh& mesh, const Params& params, std::vector<uint3
         return acc;
       },
       [](CountTotals a, const CountTotals& b) {
+        a.first_bad = std::min(a.first_bad, b.first_bad);
         a.references += b.references;
         a.subdivided += b.subdivided;
         a.deepest = std::max(a.deepest, b.deepest);
@@ -241,6 +223,16 @@ EdgeVolumeStats count_with_budget(const Mesh& mesh, const EdgeVolumeConfig& conf
   for (;;) {
     const Params params = params_for(stats.scene_volume, t, config);
     const CountTotals totals = count_pass(mesh, params, counts);
+    if (totals.first_bad != SIZE_MAX) {
+      const std::string name = mesh.name.empty() ? std::string("mesh") : mesh.name;
+      const size_t nv = mesh.vertex_count();
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t v = mesh.indices[3 * totals.first_bad + k];
+        if (v >= nv)
+          throw Error(name + ": triangle " + std::to_string(totals.first_bad) + ": vertex index " +
+                      std::to_string(v) + " out of range (mesh has " + std::to_string(nv) + " vertices)");
+      }
+    }
     // t <= 0 gives eps >= V, and no edge box inside the scene box exceeds V, so the loop
     // ends there at the latest (a scene_box smaller than the mesh needs lower t; the
     // floor below stops that too, with the budget then reported as missed by the ratio).
