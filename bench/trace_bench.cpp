@@ -40,6 +40,7 @@
 #include <vector>
 
 #include "bvhopt/build.h"
+#include "bvhopt/compaction.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
 #include "bvhopt/finalize.h"
@@ -66,6 +67,10 @@ struct Options {
   bool quick = false;
   bool wall = false;   // 1-thread figures from wall time instead of thread CPU time  // only the leaf-1 sweep tree (for A/B runs while tuning)
   double opt_seconds = 10.0;
+  // "best": the tree a user would trace (sweep SAH -> insertion optimization for
+  // best_seconds -> compaction into leaves of up to best_leaf); 0 seconds drops the row.
+  double best_seconds = 10.0;
+  uint32_t best_leaf = 8;
   std::string json_path;
 };
 
@@ -96,6 +101,8 @@ Options parse(int argc, char** argv) {
     else if (a == "--quick") o.quick = true;
     else if (a == "--wall") o.wall = true;
     else if (a == "--opt-seconds") o.opt_seconds = std::stod(value());
+    else if (a == "--best-seconds") o.best_seconds = std::stod(value());
+    else if (a == "--best-leaf") o.best_leaf = static_cast<uint32_t>(std::stoul(value()));
     else if (a == "--kinds") {
       o.kinds.clear();
       for (const std::string& k : split_list(value())) {
@@ -106,7 +113,8 @@ Options parse(int argc, char** argv) {
     } else if (a == "--help" || a == "-h") {
       std::cout << "trace_bench [--scenes DIR] [--scene FILE]... [--count N] [--repeats R]\n"
                    "            [--kinds primary,random,ao,path,shadow] [--optimizers] [--opt-seconds S]\n"
-                   "            [--quick] [--wall]   (only the leaf-1 sweep tree)\n"
+                   "            [--quick] [--wall]   (only the leaf-1 sweep tree and best)\n"
+                   "            [--best-seconds S] [--best-leaf N]   (the 'best' row; S = 0 drops it)\n"
                    "            [--json FILE]\n";
       std::exit(0);
     } else {
@@ -342,6 +350,18 @@ int run(const Options& opt) {
       Bvh bvh;
       const double s = seconds_of([&] { bvh = build_bvh(refs, b); });
       add_tree(std::string(builder_name(k)) + "-l1", std::move(bvh), s);
+    }
+    if (opt.best_seconds > 0) {
+      Bvh bvh = sweep1;
+      const double s = seconds_of([&] {
+        InsertionConfig c;
+        c.time_limit_seconds = opt.best_seconds;
+        optimize_insertion(bvh, c);
+        CompactionConfig cc;
+        cc.max_leaf_size = opt.best_leaf;
+        compact_leaves(bvh, cc);
+      });
+      add_tree("best", std::move(bvh), s);
     }
     if (opt.optimizers) {
       {

@@ -4,6 +4,7 @@
 #include "bvhopt/build.h"
 #include "bvhopt/bvh_file.h"
 #include "bvhopt/error.h"
+#include "bvhopt/leaf_dedup.h"
 #include "bvhopt/stats.h"
 #include "cli_common.h"
 #include "commands.h"
@@ -13,6 +14,7 @@ namespace bvhopt::cli {
 void register_build_command(CLI::App& app) {
   struct Options {
     SceneOption scene;
+    EvhOption evh;
     ThreadsOption threads;
     CostOption cost;
     std::string builder = "sweep";
@@ -31,6 +33,7 @@ void register_build_command(CLI::App& app) {
       ->check(CLI::Range(1u, 65535u))
       ->capture_default_str();
   cmd->add_option("--bins", opt->bins, "Bins per axis for the binned builder")->check(CLI::Range(2u, 1024u))->capture_default_str();
+  opt->evh.add_to(cmd);
   opt->cost.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_option("-o,--output", opt->output, "BVH file to write")->required();
@@ -47,21 +50,25 @@ void register_build_command(CLI::App& app) {
     options.leaf.max_leaf_size = opt->leaf_size;
     options.bin_count = opt->bins;
     Stopwatch build_clock;
-    PrimitiveRefs refs = make_references(mesh);
+    std::string evh_report;
+    PrimitiveRefs refs = opt->evh.make_refs(mesh, &evh_report);
     Bvh bvh = build_bvh(refs, options);
+    // Over subdivided references a leaf keeps one reference per triangle.
+    if (opt->evh.enabled) dedup_leaf_references(bvh, refs);
     double build_s = build_clock.seconds();
 
     BvhFileInfo info;
     info.cost = options.cost;
     info.scene_name = mesh.name;
     info.scene_triangles = mesh.triangle_count();
-    info.method = opt->builder;
+    info.method = opt->evh.enabled ? "evh+" + opt->builder : opt->builder;
     write_bvh_file(opt->output, bvh, refs, info);
 
     TreeStats st = compute_stats(bvh, options.cost);
     if (opt->json) {
       print_json({{"scene", mesh.name},
                   {"triangles", mesh.triangle_count()},
+                  {"references", refs.size()},
                   {"builder", opt->builder},
                   {"leaf_size", opt->leaf_size},
                   {"threads", opt->threads.effective()},
@@ -77,6 +84,7 @@ void register_build_command(CLI::App& app) {
     }
     std::cout << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles, loaded in "
               << format_double(load_s, 2) << " s)\n"
+              << (opt->evh.enabled ? "evh        " + evh_report + "\n" : std::string())
               << "builder    " << opt->builder << ", leaf size " << opt->leaf_size << ", "
               << opt->threads.effective() << " threads\n"
               << "build      " << format_double(build_s * 1e3, 1) << " ms\n"

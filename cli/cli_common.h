@@ -12,6 +12,7 @@
 
 #include "bvhopt/cost_model.h"
 #include "bvhopt/mesh.h"
+#include "bvhopt/references.h"
 #include "bvhopt/vec3.h"
 
 namespace bvhopt::cli {
@@ -30,6 +31,18 @@ struct SceneOption {
   std::string rotate;     // "X,Y,Z" degrees, empty for none
   void add_to(CLI::App* app, const std::string& name = "scene", bool required = true);
   Mesh load() const;      // loads, checks and rotates; throws Error
+};
+
+// --evh [--evh-t N]: Dammertz and Keller's edge volume subdivision of the triangles into
+// references, wherever a scene is built.
+struct EvhOption {
+  bool enabled = false;
+  int t = 14;
+  double max_ratio = 8.0;
+  void add_to(CLI::App* app);
+  // One reference per triangle, or the subdivided references when enabled; `report` gets a
+  // line saying what was done (empty when not enabled).
+  PrimitiveRefs make_refs(const Mesh& mesh, std::string* report = nullptr) const;
 };
 
 // --ct / --ci: the SAH cost constants.

@@ -6,6 +6,7 @@
 #include "bvhopt/compaction.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
+#include "bvhopt/leaf_dedup.h"
 #include "cli_common.h"
 #include "commands.h"
 
@@ -39,6 +40,9 @@ void register_compact_command(CLI::App& app) {
     cfg.cost = cost;
     cfg.max_leaf_size = opt->max_leaf_size;
     CompactionResult r = compact_leaves(file.bvh, cfg);
+    // A tree over subdivided references (--evh) may now hold one triangle twice in a
+    // leaf; keep one. Without subdivision this changes nothing.
+    dedup_leaf_references(file.bvh, file.refs);
     const double compact_s = clock.seconds();
     const double ocost_after = optimal_collapse_cost(file.bvh, cost, opt->max_leaf_size);
 

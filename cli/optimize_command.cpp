@@ -128,11 +128,12 @@ struct Loaded {
 };
 
 // A path ending in .bvh is a BVH file; anything else is a scene, built with sweep SAH.
-Loaded load_input(const SceneOption& scene, const CostModel& cost, bool cost_given) {
+Loaded load_input(const SceneOption& scene, const EvhOption& evh, const CostModel& cost, bool cost_given) {
   Loaded in;
   Stopwatch clock;
   if (std::filesystem::path(scene.spec).extension() == ".bvh") {
     if (!scene.rotate.empty()) throw Error(scene.spec + ": --rotate applies to scenes, not to BVH files");
+    if (evh.enabled) throw Error(scene.spec + ": --evh applies to scenes, not to BVH files");
     BvhFile file = read_bvh_file(scene.spec);
     in.bvh = std::move(file.bvh);
     in.refs = std::move(file.refs);
@@ -144,7 +145,7 @@ Loaded load_input(const SceneOption& scene, const CostModel& cost, bool cost_giv
   Mesh mesh = scene.load();
   in.load_seconds = clock.seconds();
   Stopwatch build_clock;
-  in.refs = make_references(mesh);
+  in.refs = evh.make_refs(mesh);
   SweepSahConfig sweep;
   sweep.cost = cost;
   sweep.leaf.max_leaf_size = 1;
@@ -153,7 +154,7 @@ Loaded load_input(const SceneOption& scene, const CostModel& cost, bool cost_giv
   in.info.cost = cost;
   in.info.scene_name = mesh.name;
   in.info.scene_triangles = mesh.triangle_count();
-  in.info.method = "sweep";
+  in.info.method = evh.enabled ? "evh+sweep" : "sweep";
   return in;
 }
 
@@ -174,6 +175,7 @@ void write_trace_csv(const std::string& path, const OptimizeReport& report) {
 void register_optimize_command(CLI::App& app) {
   struct Options {
     SceneOption input;
+    EvhOption evh;
     ThreadsOption threads;
     CostOption cost;
     std::string method = "anneal";
@@ -206,6 +208,7 @@ void register_optimize_command(CLI::App& app) {
       ->type_name("S");
   cmd->add_option("--seed", opt->seed, "Seed of every random choice")->capture_default_str();
   cmd->add_option("--cost-trace", opt->trace_path, "Write the cost after every pass as CSV")->type_name("FILE.csv");
+  opt->evh.add_to(cmd);
   opt->cost.add_to(cmd);
   opt->threads.add_to(cmd);
   for (const Method& m : *methods)
@@ -216,7 +219,7 @@ void register_optimize_command(CLI::App& app) {
   cmd->callback([opt, methods, cmd] {
     auto threads = opt->threads.apply();
     const bool cost_given = cmd->count("--ct") > 0 || cmd->count("--ci") > 0;
-    Loaded in = load_input(opt->input, opt->cost.model(), cost_given);
+    Loaded in = load_input(opt->input, opt->evh, opt->cost.model(), cost_given);
     const Method* method = nullptr;
     for (const Method& m : *methods)
       if (m.name == opt->method) method = &m;

@@ -29,6 +29,7 @@ void register_stats_command(CLI::App& app) {
     if (cmd->count("--ct")) model.traversal = opt->cost.traversal;
     if (cmd->count("--ci")) model.intersection = opt->cost.intersection;
     TreeStats st = compute_stats(file.bvh, model);
+    const size_t triangles = count_distinct_triangles(file.bvh, file.refs);
     if (opt->json) {
       print_json({{"file", opt->input},
                   {"scene", file.info.scene_name},
@@ -42,6 +43,8 @@ void register_stats_command(CLI::App& app) {
                   {"inner_nodes", st.inner_nodes},
                   {"leaves", st.leaves},
                   {"references", st.references},
+                  {"triangles", triangles},
+                  {"references_per_triangle", triangles ? double(st.references) / double(triangles) : 0.0},
                   {"max_depth", st.max_depth},
                   {"mean_leaf_depth", st.mean_leaf_depth},
                   {"refs_per_leaf", {{"min", st.min_refs_per_leaf}, {"max", st.max_refs_per_leaf}, {"mean", st.mean_refs_per_leaf}}},
@@ -60,6 +63,8 @@ void register_stats_command(CLI::App& app) {
               << "nodes       " << st.nodes << " (" << st.inner_nodes << " inner, " << st.leaves << " leaves)\n"
               << "references  " << st.references << " (per leaf " << st.min_refs_per_leaf << ".."
               << st.max_refs_per_leaf << ", mean " << format_double(st.mean_refs_per_leaf, 2) << ")\n"
+              << "triangles   " << triangles << " (" << format_double(triangles ? double(st.references) / triangles : 0.0, 4)
+              << " references per triangle)\n"
               << "depth       max " << st.max_depth << ", mean leaf depth " << format_double(st.mean_leaf_depth, 2)
               << "\n"
               << "area sums   inner " << format_double(st.inner_area_sum / st.root_area, 2) << ", leaves "

@@ -123,3 +123,36 @@ TEST_F(Cli, DemoPrintsARowPerMethodAndWritesHeatMaps) {
 }
 
 }  // namespace
+
+namespace {
+
+// Edge volume subdivision through the command line: more references than triangles, every
+// triangle still in the tree, and the count `info` predicts is the one `build` makes.
+TEST_F(Cli, EvhBuildMakesTheReferencesInfoPredicts) {
+  const std::string scene = "'builtin?triangles=4000' --rotate 30,30,0";
+  CliRun info = run("info " + scene + " --evh-t 14 --json");
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  auto predicted = nlohmann::json::parse(info.out)["evh"][0]["references"].get<size_t>();
+  fs::path bvh = dir_ / "evh.bvh";
+  CliRun b = run("build " + scene + " --evh --evh-t 14 --evh-max-ratio 0 --json -o " + bvh.string());
+  ASSERT_EQ(b.exit_code, 0) << b.err;
+  auto built = nlohmann::json::parse(b.out);
+  EXPECT_EQ(built["references"].get<size_t>(), predicted);
+  EXPECT_GT(predicted, 4000u);
+  CliRun s = run("stats --json " + bvh.string());
+  ASSERT_EQ(s.exit_code, 0) << s.err;
+  auto stats = nlohmann::json::parse(s.out);
+  EXPECT_EQ(stats["triangles"].get<size_t>(), 4000u);
+  EXPECT_EQ(stats["references"].get<size_t>(), predicted);  // leaf size 1: nothing to dedup
+  EXPECT_EQ(stats["method"], "evh+sweep");
+}
+
+TEST_F(Cli, EvhOnABvhFileIsRefused) {
+  fs::path bvh = dir_ / "a.bvh";
+  ASSERT_EQ(run("build 'builtin?triangles=2000' -o " + bvh.string()).exit_code, 0);
+  CliRun r = run("optimize " + bvh.string() + " --evh --method hill-climb -o " + (dir_ / "b.bvh").string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("--evh"), std::string::npos) << r.err;
+}
+
+}  // namespace

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <random>
 #include <utility>
@@ -378,6 +379,41 @@ TEST(Trace, RejectsTreesThatDoNotFitTheMesh) {
   bad_child.nodes[0].index = 0;
   EXPECT_THROW({ Tracer t(bad_child, mesh); }, Error);
   EXPECT_THROW({ Tracer t(FlatBvh{}, mesh); }, Error);
+}
+
+TEST(Trace, LeavesLargerThanANodeHoldsMatchBruteForce) {
+  // Large leaves, and trees that are one leaf (a node with an empty slot).
+  const Mesh mesh = testing::random_mesh(300, 3, /*with_degenerate=*/true);
+  for (uint32_t leaf : {16u, 40u, 300u}) {
+    const Tracer tracer(flat_tree(mesh, BuilderKind::sweep_sah, leaf), mesh);
+    const std::string what = "sweep leaf " + std::to_string(leaf);
+    for (RayKind rk : {RayKind::primary, RayKind::random, RayKind::shadow}) {
+      RaySetConfig cfg;
+      cfg.kind = rk;
+      cfg.seed = 3;
+      cfg.count = 1000;
+      const RaySet set = make_ray_set(mesh, tracer, cfg);
+      expect_matches_brute_force(tracer, mesh, set.rays, set.query, what + " " + std::string(ray_kind_name(rk)));
+    }
+  }
+  // Trees that are one leaf, of 9 entries and of 300.
+  for (uint32_t n : {9u, 300u}) {
+    const Mesh small = testing::random_mesh(n, 4, false);
+    FlatBvh flat;
+    FlatNode leaf{};
+    leaf.box = describe(small).bounds;
+    leaf.index = 0;
+    leaf.count = static_cast<uint16_t>(n);
+    flat.nodes.push_back(leaf);
+    for (uint32_t i = 0; i < n; ++i) flat.triangle_ids.push_back(i);
+    const Tracer one_leaf(flat, small);
+    EXPECT_EQ(one_leaf.node_count(), 1u);
+    RaySetConfig cfg;
+    cfg.kind = RayKind::random;
+    cfg.count = 2000;
+    const RaySet set = make_ray_set(small, one_leaf, cfg);
+    expect_matches_brute_force(one_leaf, small, set.rays, set.query, "one leaf of " + std::to_string(n));
+  }
 }
 
 TEST(Trace, SharedSceneSampleMatchesBruteForce) {

@@ -6,6 +6,8 @@
 
 #include "bvhopt/build.h"
 #include "bvhopt/validate.h"
+#include "bvhopt/leaf_dedup.h"
+#include "bvhopt/median_builder.h"
 #include "test_support.h"
 
 namespace bvhopt {
@@ -277,6 +279,42 @@ TEST(Validate, RandomCorruptionNeverCrashesAndIsAlwaysFound) {
     ValidationReport r = validate(f.bvh, f.refs);
     EXPECT_FALSE(r.ok()) << "trial " << trial << " node " << n;
   }
+}
+
+}  // namespace
+}  // namespace bvhopt
+
+namespace bvhopt {
+namespace {
+
+// Two references to triangle 7 and one to triangle 9, all in one leaf; dedup keeps one
+// reference per triangle, which only the dropped-duplicates option accepts.
+TEST(ValidateOptions, DroppedDuplicatesAcceptedOnlyWhereTheTriangleRemains) {
+  PrimitiveRefs refs = make_references({Box({0, 0, 0}, {1, 1, 1}), Box({1, 0, 0}, {2, 1, 1}), Box({3, 0, 0}, {4, 1, 1})});
+  refs.triangle_ids = {7, 7, 9};
+  MedianConfig config;
+  config.leaf.max_leaf_size = 3;
+  Bvh bvh = build_object_median(refs, config);
+  ASSERT_TRUE(validate(bvh, refs).ok());
+  LeafDedupStats st = dedup_leaf_references(bvh, refs);
+  (void)st;
+  EXPECT_FALSE(validate(bvh, refs).ok());
+  EXPECT_TRUE(validate(bvh, refs, ValidationOptions{.allow_dropped_duplicates = true}).ok())
+      << validate(bvh, refs, ValidationOptions{.allow_dropped_duplicates = true}).summary();
+
+  // Drop the only reference to triangle 9 as well: now a triangle is lost.
+  Bvh broken = bvh;
+  BvhNode& leaf = broken[broken.root];
+  ASSERT_TRUE(leaf.is_leaf());
+  ASSERT_EQ(leaf.ref_count(), 2u);
+  std::vector<uint32_t> kept(broken.ref_indices.begin(), broken.ref_indices.begin() + 2);
+  uint32_t tri9_slot = refs.triangle_ids[kept[0]] == 9 ? 0 : 1;
+  std::swap(broken.ref_indices[tri9_slot], broken.ref_indices[1]);
+  leaf.make_leaf(leaf.first_ref(), 1);
+  broken.ref_indices.resize(1);
+  ValidationReport r = validate(broken, refs, ValidationOptions{.allow_dropped_duplicates = true});
+  EXPECT_FALSE(r.ok());
+  EXPECT_NE(r.summary().find("triangle 9"), std::string::npos) << r.summary();
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 
 #include "bvhopt/bvh.h"
 #include "bvhopt/cost_model.h"
+#include "bvhopt/references.h"
 
 namespace bvhopt {
 
@@ -30,5 +31,14 @@ struct TreeStats {
 };
 
 TreeStats compute_stats(const Bvh& bvh, const CostModel& model = {});
+
+}  // namespace bvhopt
+
+namespace bvhopt {
+
+// Distinct triangles behind the references in the tree's leaves: with subdivided
+// references (edge_volume_subdivision.h) several references share a triangle, and the
+// ratio references / triangles says what the subdivision cost in memory.
+size_t count_distinct_triangles(const Bvh& bvh, const PrimitiveRefs& refs);
 
 }  // namespace bvhopt

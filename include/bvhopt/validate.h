@@ -20,6 +20,13 @@ struct ValidationReport {
 // its cached area equals its box's area; every leaf's box contains its references' boxes;
 // leaves are non-empty; every reference id appears in exactly one leaf slot, and the slots
 // in use are exactly 0..ref_indices.size()-1, once each.
-ValidationReport validate(const Bvh& bvh, const PrimitiveRefs& refs);
+struct ValidationOptions {
+  // Accept a reference that is in no leaf when some leaf holds another reference to the
+  // same triangle: what dedup_leaf_references (leaf_dedup.h) leaves behind in a tree over
+  // subdivided references. Off, every reference must be in exactly one leaf.
+  bool allow_dropped_duplicates = false;
+};
+
+ValidationReport validate(const Bvh& bvh, const PrimitiveRefs& refs, const ValidationOptions& options = {});
 
 }  // namespace bvhopt

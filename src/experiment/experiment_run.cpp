@@ -203,20 +203,57 @@ Tracer make_tracer(const Bvh& bvh, const PrimitiveRefs& refs, const Mesh& mesh) 
   return Tracer(finalize(copy, refs), mesh);
 }
 
-// Deterministic figures (traversal steps, hit rates) go to `det`, clock figures to `timing`.
-void measure_tree(Runner& run, const std::string& label, const Tracer& tracer, const RaySets& rays, json& det,
-                  json& timing) {
+// Every tree of a scene traced on the same ray sets. Deterministic figures (traversal steps,
+// hit rates) go to `det`, clock figures to `timing`. The timed passes are interleaved, round
+// by round over all trees, so that a burst of load from other processes on a shared machine
+// slows every tree alike instead of spoiling one tree's figure; each figure is the median of
+// `repeats` passes (the first taken by measure_rays right after its untimed pass).
+struct TracedTree {
+  std::string key;
+  Tracer tracer;
+};
+void measure_trees(Runner& run, const std::vector<TracedTree>& trees, const RaySets& rays, json& det_trees,
+                   json& timing_trees) {
+  const int repeats = std::max(1, run.config().repeats);
+  const size_t sets = rays.sets.size();
+  std::vector<std::vector<double>> samples(trees.size() * sets);
   MeasureOptions mo;
-  mo.repeats = std::max(1, run.config().repeats);
-  for (const RaySet& set : rays.sets) {
-    const std::string kind(ray_kind_name(set.kind));
-    run.step(label + ": rays " + kind, -1.0);
-    RayMeasurement m = measure_rays(tracer, set.rays, set.query, mo);
-    det["steps"][kind] = m.steps.mean;
-    det["triangle_tests"][kind] = m.triangle_tests.mean;
-    det["hit_rate"][kind] = m.hit_rate;
-    timing["ray_seconds"][kind] = m.seconds;
-    timing["mrays_per_second"][kind] = m.rays_per_second * 1e-6;
+  mo.repeats = 1;
+  for (size_t t = 0; t < trees.size(); ++t) {
+    for (size_t k = 0; k < sets; ++k) {
+      const RaySet& set = rays.sets[k];
+      const std::string kind(ray_kind_name(set.kind));
+      run.step(trees[t].key + ": rays " + kind, 0.85);
+      RayMeasurement m = measure_rays(trees[t].tracer, set.rays, set.query, mo);
+      json& d = det_trees[trees[t].key];
+      d["steps"][kind] = m.steps.mean;
+      d["triangle_tests"][kind] = m.triangle_tests.mean;
+      d["hit_rate"][kind] = m.hit_rate;
+      samples[t * sets + k].push_back(m.seconds);
+    }
+  }
+  std::vector<Hit> hits;
+  for (int round = 1; round < repeats; ++round) {
+    run.step("timing round " + std::to_string(round + 1) + " of " + std::to_string(repeats), 0.9);
+    for (size_t t = 0; t < trees.size(); ++t) {
+      for (size_t k = 0; k < sets; ++k) {
+        const RaySet& set = rays.sets[k];
+        const auto t0 = Clock::now();
+        trace_rays(trees[t].tracer, set.rays, set.query, hits);
+        samples[t * sets + k].push_back(seconds_since(t0));
+      }
+    }
+  }
+  for (size_t t = 0; t < trees.size(); ++t) {
+    for (size_t k = 0; k < sets; ++k) {
+      std::vector<double>& v = samples[t * sets + k];
+      std::sort(v.begin(), v.end());
+      const double median = v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+      const std::string kind(ray_kind_name(rays.sets[k].kind));
+      json& tm = timing_trees[trees[t].key];
+      tm["ray_seconds"][kind] = median;
+      tm["mrays_per_second"][kind] = median > 0.0 ? 1e-6 * double(rays.sets[k].rays.size()) / median : 0.0;
+    }
   }
 }
 
@@ -292,10 +329,8 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
   json& trees = det["trees"];
   json& ttimes = timing["trees"];
   trees["sah"] = tree_det(sah);
-  measure_tree(run, "SAH", sah_tracer, rays, trees["sah"], ttimes["sah"]);
   ttimes["sah"]["optimize_seconds"] = 0.0;
   trees["median"] = tree_det(median);
-  measure_tree(run, "spatial median", make_tracer(median, refs, mesh), rays, trees["median"], ttimes["median"]);
   ttimes["median"]["optimize_seconds"] = 0.0;
 
   std::vector<std::pair<std::string, Bvh>> optimized;
@@ -370,25 +405,29 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
     optimized.emplace_back(key, std::move(tree));
   }
 
-  // Ray measurements of the optimized trees; heat maps of the SAH tree and the best one.
-  std::string best_key;
+  // Ray measurements of all six trees together; heat maps of the SAH tree and the best one.
+  std::string best_key = "sah";
   double best_cost = trees["sah"]["cost"].get<double>();
-  const Bvh* best_tree = &sah;
+  std::vector<TracedTree> traced;
+  traced.push_back({"sah", make_tracer(sah, refs, mesh)});
+  traced.push_back({"median", make_tracer(median, refs, mesh)});
   for (auto& [key, tree] : optimized) {
-    measure_tree(run, key, make_tracer(tree, refs, mesh), rays, trees[key], ttimes[key]);
+    traced.push_back({key, make_tracer(tree, refs, mesh)});
     const double c = trees[key]["cost"].get<double>();
     if (c < best_cost) {
       best_cost = c;
       best_key = key;
-      best_tree = &tree;
     }
   }
+  measure_trees(run, traced, rays, trees, ttimes);
   run.step("heat maps", 0.98);
-  det["best_tree"] = best_key.empty() ? "sah" : best_key;
+  det["best_tree"] = best_key;
   const std::string heat_sah = "heat_" + name + "_sah.png";
   const std::string heat_best = "heat_" + name + "_best.png";
-  write_heatmap(sah_tracer, heat_rays, out / heat_sah);
-  write_heatmap(make_tracer(*best_tree, refs, mesh), heat_rays, out / heat_best);
+  for (const TracedTree& t : traced) {
+    if (t.key == "sah") write_heatmap(t.tracer, heat_rays, out / heat_sah);
+    if (t.key == best_key) write_heatmap(t.tracer, heat_rays, out / heat_best);
+  }
   return json{{"det", det}, {"timing", timing}, {"images", {heat_sah, heat_best}}};
 }
 

@@ -289,7 +289,7 @@ void write_bvh_file(const std::filesystem::path& path, const Bvh& bvh, const Pri
                     const BvhFileInfo& info) {
   const std::string name = path.string();
   // The reader validates every tree; writing one it would refuse helps nobody.
-  ValidationReport report = validate(bvh, refs);
+  ValidationReport report = validate(bvh, refs, ValidationOptions{.allow_dropped_duplicates = true});
   if (!report.ok()) throw Error(name + ": refusing to write an invalid tree: " + report.summary());
   if (refs.size() > kMaxCount) throw Error(name + ": too many references for the format");
   if (info.scene_name.size() > kMaxCount || info.method.size() > kMaxCount)
@@ -494,7 +494,7 @@ BvhFile read_bvh_file(const std::filesystem::path& path) {
                     std::to_string(refs.triangle_ids[r]) + " out of range (the scene has " +
                     std::to_string(out.info.scene_triangles) + " triangles)");
 
-  ValidationReport report = validate(bvh, refs);
+  ValidationReport report = validate(bvh, refs, ValidationOptions{.allow_dropped_duplicates = true});
   if (!report.ok()) throw Error(name + ": invalid tree: " + report.summary());
   return out;
 }

@@ -56,3 +56,24 @@ TreeStats compute_stats(const Bvh& bvh, const CostModel& model) {
 }
 
 }  // namespace bvhopt
+
+namespace bvhopt {
+
+size_t count_distinct_triangles(const Bvh& bvh, const PrimitiveRefs& refs) {
+  uint32_t max_id = 0;
+  for (uint32_t t : refs.triangle_ids) max_id = std::max(max_id, t);
+  std::vector<uint8_t> seen(refs.empty() ? 0 : size_t(max_id) + 1, 0);
+  size_t distinct = 0;
+  for (uint32_t n : bvh.depth_first_order()) {
+    const BvhNode& nd = bvh[n];
+    if (!nd.is_leaf()) continue;
+    for (uint32_t i = 0; i < nd.ref_count(); ++i) {
+      uint32_t t = refs.triangle_ids[bvh.ref_indices[nd.first_ref() + i]];
+      distinct += !seen[t];
+      seen[t] = 1;
+    }
+  }
+  return distinct;
+}
+
+}  // namespace bvhopt

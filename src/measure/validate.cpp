@@ -1,5 +1,7 @@
 #include "bvhopt/validate.h"
 
+#include <algorithm>
+
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -59,7 +61,7 @@ std::string ValidationReport::summary() const {
   return s;
 }
 
-ValidationReport validate(const Bvh& bvh, const PrimitiveRefs& refs) {
+ValidationReport validate(const Bvh& bvh, const PrimitiveRefs& refs, const ValidationOptions& options) {
   ValidationReport report;
   Collector out(report);
   const size_t node_count = bvh.nodes.size();
@@ -212,8 +214,21 @@ ValidationReport validate(const Bvh& bvh, const PrimitiveRefs& refs) {
       out.add("node " + num(owner) + ": leaf box " + fmt_box(leaf_box) + " does not contain the box of reference " +
               num(r) + " (slot " + num(s) + ") " + fmt_box(refs.boxes[r]));
   }
-  for (size_t r = 0; r < ref_count; ++r)
-    if (ref_slot[r] == kInvalidNode) out.add("reference " + num(r) + " is in no leaf");
+  if (!options.allow_dropped_duplicates) {
+    for (size_t r = 0; r < ref_count; ++r)
+      if (ref_slot[r] == kInvalidNode) out.add("reference " + num(r) + " is in no leaf");
+  } else if (refs.triangle_ids.size() == ref_count) {
+    // A reference may be missing only where a leaf still holds its triangle.
+    uint32_t max_triangle = 0;
+    for (uint32_t t : refs.triangle_ids) max_triangle = std::max(max_triangle, t);
+    std::vector<uint8_t> triangle_present(ref_count == 0 ? 0 : size_t(max_triangle) + 1, 0);
+    for (size_t r = 0; r < ref_count; ++r)
+      if (ref_slot[r] != kInvalidNode) triangle_present[refs.triangle_ids[r]] = 1;
+    for (size_t r = 0; r < ref_count; ++r)
+      if (ref_slot[r] == kInvalidNode && !triangle_present[refs.triangle_ids[r]])
+        out.add("reference " + num(r) + " is in no leaf, and neither is any other reference to triangle " +
+                num(refs.triangle_ids[r]));
+  }
   out.finish();
   return report;
 }

@@ -62,8 +62,9 @@ struct PieceStats {
 };
 
 // Subdivides one triangle depth-first (first piece first), calling leaf(a, b, c) for each
-// final piece and split(parent_box, a0, b0, c0, a1, b1, c1) for each split. Explicit stack:
-// the second piece waits while the first is finished, so at most max_depth wait.
+// final piece and split(parent corners, first piece's, second piece's) for each split.
+// Explicit stack: the second piece waits while the first is finished, so at most
+// max_depth wait.
 template <class Leaf, class Split>
 inline PieceStats subdivide_one(const Vec3& v0, const Vec3& v1, const Vec3& v2, const Params& params,
                                 Leaf&& leaf, Split&& split) {
@@ -71,24 +72,42 @@ inline PieceStats subdivide_one(const Vec3& v0, const Vec3& v1, const Vec3& v2, 
     Vec3 v[3];
     uint32_t depth;
   };
-  Item stack[kMaxDepthLimit + 1];
+  // Pieces waiting for their turn. Raw storage: Vec3 zero-initializes, and clearing 1 KB per
+  // triangle cost more than the whole test of an unsplit triangle.
+  struct Pending {
+    float v[9];
+    uint32_t depth;
+  };
+  Pending stack[kMaxDepthLimit + 1];
+  auto push = [&](const Vec3& a, const Vec3& b, const Vec3& c, uint32_t depth, uint32_t at) {
+    stack[at] = Pending{{a.x, a.y, a.z, b.x, b.y, b.z, c.x, c.y, c.z}, depth};
+  };
+  auto pop = [&](uint32_t at) {
+    const float* f = stack[at].v;
+    return Item{{Vec3(f[0], f[1], f[2]), Vec3(f[3], f[4], f[5]), Vec3(f[6], f[7], f[8])}, stack[at].depth};
+  };
   uint32_t top = 0;
   PieceStats stats;
   Item cur{{v0, v1, v2}, 0};
   for (;;) {
     const double vol[3] = {edge_volume(cur.v[0], cur.v[1]), edge_volume(cur.v[1], cur.v[2]),
                            edge_volume(cur.v[2], cur.v[0])};
+    // Most triangles are not split: test the largest volume without data-dependent branches
+    // first (the branch on the result is predictable); choose the edge only when splitting.
+    const double largest = std::max(std::max(vol[0], vol[1]), vol[2]);
     int e = 0;
-    if (vol[1] > vol[e]) e = 1;
-    if (vol[2] > vol[e]) e = 2;
-    if (vol[e] > params.eps) {
+    if (largest > params.eps) {
+      if (vol[1] > vol[e]) e = 1;
+      if (vol[2] > vol[e]) e = 2;
+    }
+    if (largest > params.eps && vol[e] > params.eps) {
       if (cur.depth < params.max_depth) {
         // Edge e runs from p to q; r is the opposite corner. Both pieces keep the winding.
         const Vec3 p = cur.v[e], q = cur.v[(e + 1) % 3], r = cur.v[(e + 2) % 3];
         const Vec3 m = edge_midpoint(p, q);
         const uint32_t d = cur.depth + 1;
         split(cur.v[0], cur.v[1], cur.v[2], p, m, r, m, q, r);
-        stack[top++] = Item{{m, q, r}, d};
+        push(m, q, r, d, top++);
         cur = Item{{p, m, r}, d};
         continue;
       }
@@ -98,7 +117,7 @@ inline PieceStats subdivide_one(const Vec3& v0, const Vec3& v1, const Vec3& v2, 
     ++stats.pieces;
     stats.deepest = std::max(stats.deepest, cur.depth);
     if (top == 0) break;
-    cur = stack[--top];
+    cur = pop(--top);
   }
   return stats;
 }
