@@ -40,6 +40,8 @@ void register_build_command(CLI::App& app) {
   cmd->add_flag("--json", opt->json, "Print the summary as JSON");
   cmd->callback([opt] {
     auto threads = opt->threads.apply();
+    ProgressLine progress;
+    progress.update("loading " + opt->scene.spec, true);
     Stopwatch load_clock;
     Mesh mesh = opt->scene.load();
     double load_s = load_clock.seconds();
@@ -49,6 +51,7 @@ void register_build_command(CLI::App& app) {
     options.cost = opt->cost.model();
     options.leaf.max_leaf_size = opt->leaf_size;
     options.bin_count = opt->bins;
+    progress.update("building " + std::to_string(mesh.triangle_count()) + " triangles with " + opt->builder, true);
     Stopwatch build_clock;
     std::string evh_report;
     PrimitiveRefs refs = opt->evh.make_refs(mesh, &evh_report);
@@ -62,7 +65,9 @@ void register_build_command(CLI::App& app) {
     info.scene_name = mesh.name;
     info.scene_triangles = mesh.triangle_count();
     info.method = opt->evh.enabled ? "evh+" + opt->builder : opt->builder;
+    progress.update("writing " + opt->output, true);
     write_bvh_file(opt->output, bvh, refs, info);
+    progress.finish();
 
     TreeStats st = compute_stats(bvh, options.cost);
     if (opt->json) {

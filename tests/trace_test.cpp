@@ -381,7 +381,7 @@ TEST(Trace, RejectsTreesThatDoNotFitTheMesh) {
   EXPECT_THROW({ Tracer t(FlatBvh{}, mesh); }, Error);
 }
 
-TEST(Trace, LeavesLargerThanANodeHoldsMatchBruteForce) {
+TEST(Trace, LargeLeavesAndOneLeafTreesMatchBruteForce) {
   // Large leaves, and trees that are one leaf (a node with an empty slot).
   const Mesh mesh = testing::random_mesh(300, 3, /*with_degenerate=*/true);
   for (uint32_t leaf : {16u, 40u, 300u}) {
