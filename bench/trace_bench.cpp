@@ -4,7 +4,12 @@
 // and the correlation of SAH cost with time per ray across the trees of each scene.
 //
 //   trace_bench [--scenes DIR] [--scene FILE]... [--count N] [--repeats R]
-//               [--kinds primary,random,ao] [--optimizers] [--quick] [--opt-seconds S] [--json FILE]
+//               [--kinds primary,random,ao] [--optimizers] [--quick] [--opt-seconds S]
+//               [--best-seconds S] [--best-leaf N] [--json FILE]
+//
+// The row "best" is the tree a user would trace: sweep SAH, insertion optimization for
+// --best-seconds (default 10), compaction into leaves of up to --best-leaf (default 8) with
+// the default c_T/c_I. --quick keeps only sweep-l1 and best.
 //
 // Every figure is the median of R timed passes; the candidates are timed round-robin within
 // each repeat so machine load drifts alike over all of them. Ratios are ours / Embree's.

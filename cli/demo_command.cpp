@@ -93,7 +93,10 @@ void register_demo_command(CLI::App& app) {
     } best;
 
     std::vector<DemoRow> rows;
-    auto measure = [&](DemoRow row, const Bvh& bvh) {
+    auto measure = [&](const std::string& method, double seconds, const Bvh& bvh) {
+      DemoRow row;
+      row.method = method;
+      row.seconds = seconds;
       row.stats = compute_stats(bvh, model);
       progress.update("tracing: " + row.method, true);
       Tracer tracer(finalize(bvh, refs), mesh);
@@ -138,7 +141,7 @@ void register_demo_command(CLI::App& app) {
         sweep = bvh;
         sweep_s = s;
       }
-      measure({std::string(builder_name(kind)), s}, bvh);
+      measure(std::string(builder_name(kind)), s, bvh);
     }
 
     // The optimizers all start from the sweep SAH tree with one reference per leaf; their
@@ -155,7 +158,7 @@ void register_demo_command(CLI::App& app) {
       config.cost = model;
       config.on_pass = on_pass("sweep+hill-climb");
       OptimizeReport r = hill_climb(bvh, config);
-      measure({"sweep+hill-climb", sweep_s + r.seconds}, bvh);
+      measure("sweep+hill-climb", sweep_s + r.seconds, bvh);
     }
     {
       Bvh bvh = sweep;
@@ -165,7 +168,7 @@ void register_demo_command(CLI::App& app) {
       if (opt->quick) config.schedule_passes = 250;
       config.on_pass = on_pass("sweep+anneal");
       OptimizeReport r = anneal(bvh, config);
-      measure({"sweep+anneal", sweep_s + r.seconds}, bvh);
+      measure("sweep+anneal", sweep_s + r.seconds, bvh);
     }
     {
       Bvh bvh = sweep;
@@ -173,12 +176,12 @@ void register_demo_command(CLI::App& app) {
       config.cost = model;
       config.seed = opt->seed;
       OptimizeReport r = optimize_insertion(bvh, config, on_pass("sweep+insertion"));
-      measure({"sweep+insertion", sweep_s + r.seconds}, bvh);
+      measure("sweep+insertion", sweep_s + r.seconds, bvh);
       Stopwatch clock;
       CompactionConfig cc;
       cc.cost = model;
       compact_leaves(bvh, cc);
-      measure({"sweep+insertion+compact", sweep_s + r.seconds + clock.seconds()}, bvh);
+      measure("sweep+insertion+compact", sweep_s + r.seconds + clock.seconds(), bvh);
     }
     progress.finish();
 
