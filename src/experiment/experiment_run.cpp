@@ -170,7 +170,8 @@ class Runner {
     p.pass = pass;
     p.elapsed = seconds_since(start_);
     const double done = done_weight_ + task_weight_ * std::clamp(fraction, 0.0, 1.0);
-    p.remaining = done > 0.0 ? p.elapsed * (total_weight_ - done) / done : -1.0;
+    // Too early an estimate only says 0:00; wait for a few seconds of work.
+    p.remaining = done > 0.0 && p.elapsed > 2.0 ? p.elapsed * (total_weight_ - done) / done : -1.0;
     p.task = task_ordinal_;
     p.task_count = static_cast<uint32_t>(task_count_);
     config_.on_progress(p);
