@@ -65,8 +65,9 @@ TEST(Compaction, EqualsOcostAndNeverRaisesTheCost) {
       EXPECT_NEAR(sah_cost(t), r.cost_after, 1e-12 * ocost);
       EXPECT_EQ(t.nodes.size(), r.nodes_after);
       EXPECT_EQ(r.nodes_after, 2 * r.leaves_after - 1);
-      for (const BvhNode& n : t.nodes)
+      for (const BvhNode& n : t.nodes) {
         if (n.is_leaf() && max_leaf != 0) EXPECT_LE(n.ref_count(), std::max(max_leaf, 1u));
+      }
       // Compacting twice changes nothing: the first pass already took every collapse.
       Bvh again = t;
       CompactionResult r2 = compact_leaves(again, cfg);
