@@ -14,6 +14,7 @@
 #include <sstream>
 #include <vector>
 
+#include "bvhopt/atomic_file.h"
 #include "bvhopt/bvh_file.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
@@ -159,15 +160,14 @@ Loaded load_input(const SceneOption& scene, const EvhOption& evh, const CostMode
 }
 
 void write_trace_csv(const std::string& path, const OptimizeReport& report) {
-  std::ofstream f(path);
-  if (!f) throw Error(path + ": cannot open the cost trace for writing");
+  std::ostringstream f;
   f.precision(10);
   f << "pass,cost,best_cost,temperature,moves,seconds\n";
   f << 0 << ',' << report.initial_cost << ',' << report.initial_cost << ",0,0,0\n";
   for (const PassRecord& p : report.trace)
     f << p.pass << ',' << p.cost << ',' << p.best_cost << ',' << p.temperature << ',' << p.moves << ',' << p.seconds
       << '\n';
-  if (!f) throw Error(path + ": write failed");
+  write_text_atomically(path, f.str());
 }
 
 }  // namespace

@@ -66,7 +66,9 @@ TEST(Compaction, EqualsOcostAndNeverRaisesTheCost) {
       EXPECT_EQ(t.nodes.size(), r.nodes_after);
       EXPECT_EQ(r.nodes_after, 2 * r.leaves_after - 1);
       for (const BvhNode& n : t.nodes) {
-        if (n.is_leaf() && max_leaf != 0) EXPECT_LE(n.ref_count(), std::max(max_leaf, 1u));
+        if (n.is_leaf() && max_leaf != 0) {
+          EXPECT_LE(n.ref_count(), std::max(max_leaf, 1u));
+        }
       }
       // Compacting twice changes nothing: the first pass already took every collapse.
       Bvh again = t;

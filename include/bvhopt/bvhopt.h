@@ -27,6 +27,7 @@
 #include "bvhopt/stats.h"
 #include "bvhopt/validate.h"
 #include "bvhopt/bvh_file.h"
+#include "bvhopt/atomic_file.h"
 
 #include "bvhopt/ray.h"
 #include "bvhopt/ray_sets.h"

@@ -9,6 +9,7 @@
 
 #include "bvhopt/error.h"
 #include "experiment/experiment_internal.h"
+#include "bvhopt/atomic_file.h"
 
 namespace bvhopt::experiment_detail {
 namespace {
@@ -117,15 +118,7 @@ json read_json_file(const fs::path& path) {
 }
 
 void write_text_file(const fs::path& path, const std::string& text) {
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary);
-    out << text;
-    if (!out) throw Error(tmp.string() + ": cannot write");
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) throw Error(path.string() + ": cannot rename into place: " + ec.message());
+  write_text_atomically(path, text);
 }
 
 json published_figures() {

@@ -13,6 +13,7 @@
 
 #include "bvhopt/error.h"
 #include "bvhopt/validate.h"
+#include "bvhopt/atomic_file.h"
 
 // The layout is described byte for byte in docs/file-format.md; keep the two in step.
 
@@ -295,26 +296,14 @@ void write_bvh_file(const std::filesystem::path& path, const Bvh& bvh, const Pri
   if (info.scene_name.size() > kMaxCount || info.method.size() > kMaxCount)
     throw Error(name + ": scene name or method too long");
 
-  std::filesystem::path tmp = path;
-  tmp += ".tmp-" + std::to_string(static_cast<long>(::getpid()));
-  FilePtr f(std::fopen(tmp.c_str(), "wb"));
-  if (!f) throw Error(name + ": cannot create temporary file " + tmp.string() + ": " + sys_error(errno));
-  try {
+  write_atomically(path, [&](const std::filesystem::path& tmp) {
+    FilePtr f(std::fopen(tmp.c_str(), "wb"));
+    if (!f) throw Error(name + ": cannot create temporary file " + tmp.string() + ": " + sys_error(errno));
     std::setvbuf(f.get(), nullptr, _IONBF, 0);  // Writer buffers in 1 MiB chunks already
     write_contents(f.get(), name, bvh, refs, info);
-    if (std::fflush(f.get()) != 0 || std::ferror(f.get()))
-      throw Error(name + ": write failed: " + sys_error(errno));
-    std::FILE* raw = f.release();
-    if (std::fclose(raw) != 0) throw Error(name + ": closing the file failed: " + sys_error(errno));
-    std::error_code ec;
-    std::filesystem::rename(tmp, path, ec);
-    if (ec) throw Error(name + ": cannot rename " + tmp.string() + " into place: " + ec.message());
-  } catch (...) {
-    f.reset();
-    std::error_code ignored;
-    std::filesystem::remove(tmp, ignored);
-    throw;
-  }
+    if (std::fflush(f.get()) != 0 || std::ferror(f.get())) throw Error(name + ": write failed: " + sys_error(errno));
+    if (std::fclose(f.release()) != 0) throw Error(name + ": closing the file failed: " + sys_error(errno));
+  });
 }
 
 BvhFile read_bvh_file(const std::filesystem::path& path) {

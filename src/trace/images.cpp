@@ -1,6 +1,7 @@
 // Heat maps and shaded images, written as PNG by stb_image_write (implementation in libstb).
 #include "bvhopt/images.h"
 
+
 #include <stb/stb_image_write.h>
 #include <unistd.h>
 
@@ -10,6 +11,7 @@
 #include <system_error>
 
 #include "bvhopt/error.h"
+#include "bvhopt/atomic_file.h"
 
 namespace bvhopt {
 namespace {
@@ -82,21 +84,10 @@ Image difference_image(const std::vector<TraceCounters>& a, const std::vector<Tr
 void write_png(const std::filesystem::path& path, const Image& image) {
   if (image.width == 0 || image.height == 0 || image.rgb.size() != size_t(image.width) * image.height * 3)
     throw Error(path.string() + ": cannot write an empty or malformed image");
-  const std::filesystem::path tmp = path.string() + ".tmp-" + std::to_string(::getpid()) + ".png";
-  const int ok = stbi_write_png(tmp.c_str(), int(image.width), int(image.height), 3, image.rgb.data(),
-                                int(image.width * 3));
-  if (!ok) {
-    std::error_code ec;
-    std::filesystem::remove(tmp, ec);
-    throw Error(path.string() + ": PNG write failed (no permission, missing folder or disk full?)");
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::error_code ignore;
-    std::filesystem::remove(tmp, ignore);
-    throw Error(path.string() + ": cannot rename temporary file into place: " + ec.message());
-  }
+  write_atomically(path, [&](const std::filesystem::path& tmp) {
+    if (!stbi_write_png(tmp.c_str(), int(image.width), int(image.height), 3, image.rgb.data(), int(image.width * 3)))
+      throw Error(path.string() + ": PNG write failed (no permission, missing folder or disk full?)");
+  });
 }
 
 }  // namespace bvhopt

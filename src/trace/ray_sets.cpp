@@ -1,6 +1,7 @@
 // Ray set generation and the ray file.
 #include "bvhopt/ray_sets.h"
 
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
@@ -15,6 +16,7 @@
 #include <system_error>
 
 #include "bvhopt/error.h"
+#include "bvhopt/atomic_file.h"
 
 namespace bvhopt {
 namespace {
@@ -375,27 +377,14 @@ void write_ray_file(const std::filesystem::path& path, const RaySet& set) {
   h.seed = set.seed;
   h.count = set.rays.size();
   h.checksum = checksum_of(h, set.rays);
-  const std::filesystem::path tmp = path.string() + ".tmp-" + std::to_string(::getpid());
-  {
+  write_atomically(path, [&](const std::filesystem::path& tmp) {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) throw Error(path.string() + ": cannot create temporary file " + tmp.string());
     out.write(reinterpret_cast<const char*>(&h), sizeof h);
     out.write(reinterpret_cast<const char*>(set.rays.data()), std::streamsize(set.rays.size() * sizeof(Ray)));
-    out.flush();
-    if (!out) {
-      out.close();
-      std::error_code ec;
-      std::filesystem::remove(tmp, ec);
-      throw Error(path.string() + ": write failed (disk full or no permission?)");
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::error_code ignore;
-    std::filesystem::remove(tmp, ignore);
-    throw Error(path.string() + ": cannot rename temporary file into place: " + ec.message());
-  }
+    out.close();
+    if (!out) throw Error(path.string() + ": write failed (disk full or no permission?)");
+  });
 }
 
 RaySet read_ray_file(const std::filesystem::path& path) {
