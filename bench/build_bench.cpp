@@ -10,24 +10,21 @@
 // the ratios stay meaningful on a shared machine. Peak heap is the most the builder held
 // at once beyond what existed before it started (counted by a replaced operator new): the
 // tree it returns plus its scratch; the references (40 bytes each) come on top.
-#include <tbb/global_control.h>
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <ctime>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <iostream>
 #include <malloc.h>
 #include <new>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
 #include <vector>
+
+#include "bench_support.h"
 
 #include "bvhopt/build.h"
 #include "bvhopt/cost.h"
@@ -76,26 +73,28 @@ void operator delete[](void* p, size_t, std::align_val_t) noexcept { note_free(p
 namespace bvhopt {
 namespace {
 
+using namespace bench;
 using Clock = std::chrono::steady_clock;
-
-// CPU time of the whole process. On one thread it is the build's own time even when other
-// processes crowd the machine; on more threads it adds up all threads (spinning included).
-double process_cpu_ms() {
-  timespec ts{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) * 1e3 + double(ts.tv_nsec) * 1e-6;
-}
 
 struct Timing {
   double wall_ms = 0.0;
   double cpu_ms = 0.0;
 };
 
+// Wall and CPU milliseconds of `f`. The CPU time is the whole process's: on one thread it is
+// the build's own time even when other processes crowd the machine; on more threads it adds
+// up all threads (spinning included).
+Timing time_ms(const std::function<void()>& f) {
+  const double c0 = process_cpu_seconds();
+  const auto t0 = Clock::now();
+  f();
+  const auto t1 = Clock::now();
+  const double c1 = process_cpu_seconds();
+  return Timing{std::chrono::duration<double, std::milli>(t1 - t0).count(), (c1 - c0) * 1e3};
+}
+
 struct Options {
-  std::filesystem::path scenes_dir;
-  std::vector<std::string> scenes;  // explicit picks; empty = every scene in scenes_dir
-  bool builtin = true;
-  std::string builtin_spec = "builtin";
+  SceneOptions scenes;
   std::vector<int> threads{1, 2};
   int runs = 5;
   std::vector<BuilderKind> builders = all_builders();
@@ -103,39 +102,21 @@ struct Options {
   std::string json_path;
 };
 
-std::vector<std::string> split_list(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
 Options parse(int argc, char** argv) {
   Options o;
-  if (const char* env = std::getenv("BVHOPT_SCENES"); env && *env)
-    o.scenes_dir = env;
-  else
-    o.scenes_dir = "../shared/scenes";
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw Error("build_bench: option " + a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--scenes") o.scenes_dir = value();
-    else if (a == "--scene") o.scenes.push_back(value());
-    else if (a == "--no-builtin") o.builtin = false;
-    else if (a == "--builtin") o.builtin_spec = value();
-    else if (a == "--no-embree") o.embree = false;
-    else if (a == "--json") o.json_path = value();
-    else if (a == "--runs") o.runs = std::max(1, std::stoi(value()));
+  Args args(argc, argv, "build_bench");
+  while (args.next()) {
+    const std::string& a = args.current();
+    if (read_scene_option(args, o.scenes)) continue;
+    if (a == "--no-embree") o.embree = false;
+    else if (a == "--json") o.json_path = args.value();
+    else if (a == "--runs") o.runs = std::max(1, std::stoi(args.value()));
     else if (a == "--threads") {
       o.threads.clear();
-      for (auto& t : split_list(value())) o.threads.push_back(std::max(1, std::stoi(t)));
+      for (auto& t : split_list(args.value())) o.threads.push_back(std::max(1, std::stoi(t)));
     } else if (a == "--builders") {
       o.builders.clear();
-      for (auto& b : split_list(value())) {
+      for (auto& b : split_list(args.value())) {
         auto k = parse_builder(b);
         if (!k) throw Error("build_bench: unknown builder '" + b + "' (sweep, binned, spatial-median, object-median)");
         o.builders.push_back(*k);
@@ -150,28 +131,6 @@ Options parse(int argc, char** argv) {
     }
   }
   return o;
-}
-
-std::vector<std::string> scene_list(const Options& o) {
-  std::vector<std::string> specs = o.scenes;
-  if (specs.empty()) {
-    if (!std::filesystem::is_directory(o.scenes_dir))
-      throw Error(o.scenes_dir.string() + ": scenes folder not found (set BVHOPT_SCENES or pass --scenes DIR)");
-    for (const auto& e : std::filesystem::directory_iterator(o.scenes_dir)) {
-      std::string ext = e.path().extension().string();
-      if (e.is_regular_file() && (ext == ".obj" || ext == ".ply" || ext == ".glb" || ext == ".gltf"))
-        specs.push_back(e.path().string());
-    }
-    std::sort(specs.begin(), specs.end());
-  }
-  if (o.builtin) specs.push_back(o.builtin_spec);
-  return specs;
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  size_t m = v.size() / 2;
-  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
 }
 
 struct Result {
@@ -313,18 +272,15 @@ Timing embree_build_once(RTCDevice device, const PrimitiveRefs& refs, std::vecto
   args.setNodeChildren = embree_set_children;
   args.setNodeBounds = embree_set_bounds;
   args.createLeaf = embree_create_leaf;
-  double c0 = process_cpu_ms();
-  auto t0 = Clock::now();
-  auto* root = static_cast<EmbreeNode*>(rtcBuildBVH(&args));
-  auto t1 = Clock::now();
-  double c1 = process_cpu_ms();
+  EmbreeNode* root = nullptr;
+  const Timing t = time_ms([&] { root = static_cast<EmbreeNode*>(rtcBuildBVH(&args)); });
   if (!root) {
     rtcReleaseBVH(ebvh);
     throw Error("embree: rtcBuildBVH failed: " + g_embree_message);
   }
   if (keep) *keep = convert_embree(root, refs);
   rtcReleaseBVH(ebvh);
-  return Timing{std::chrono::duration<double, std::milli>(t1 - t0).count(), c1 - c0};
+  return t;
 }
 #endif
 
@@ -337,14 +293,14 @@ int run(int argc, char** argv) {
               opt.runs, cost.traversal, cost.intersection);
   std::printf("%-22s %9s %-15s %3s %10s %10s %9s %9s %9s %10s %8s %8s %8s\n", "scene", "refs", "builder", "thr",
               "ms", "cpu ms", "Mrefs/s", "cost", "ocost", "heap B/ref", "t/peer", "cpu/peer", "c/peer");
-  for (const std::string& spec : scene_list(opt)) {
+  for (const std::string& spec : scene_specs(opt.scenes)) {
     Mesh mesh = load_scene(spec);
     PrimitiveRefs refs = make_references(mesh);
     std::string scene = std::filesystem::path(spec).filename().string();
     if (scene.rfind("builtin", 0) == 0) scene = spec;
     const size_t n = refs.size();
     for (int threads : opt.threads) {
-      tbb::global_control gc(tbb::global_control::max_allowed_parallelism, threads);
+      ThreadLimit limit(threads);
       std::vector<Contestant> cs;
       cs.reserve(opt.builders.size() + 1);
 #ifdef BVHOPT_HAVE_EMBREE
@@ -371,14 +327,11 @@ int run(int argc, char** argv) {
           c.tree = Bvh{};
           int64_t before = g_live.load();
           g_peak.store(before);
-          double c0 = process_cpu_ms();
-          auto t0 = Clock::now();
-          Bvh bvh = build_bvh(refs, bo);
-          auto t1 = Clock::now();
-          double c1 = process_cpu_ms();
+          Bvh bvh;
+          const Timing t = time_ms([&] { bvh = build_bvh(refs, bo); });
           c.peak_extra_bytes = std::max(c.peak_extra_bytes, g_peak.load() - before);
           if (keep) c.tree = std::move(bvh);
-          return Timing{std::chrono::duration<double, std::milli>(t1 - t0).count(), c1 - c0};
+          return t;
         };
       }
       run_rounds(cs, opt.runs, scene, threads);
@@ -408,16 +361,16 @@ int run(int argc, char** argv) {
         r.scene = scene;
         r.refs = n;
         r.threads = threads;
-        char heap[32] = "-", tr[32] = "-", cpur[32] = "-", cr[32] = "-";
-        if (r.builder != "embree-medium") std::snprintf(heap, sizeof heap, "%.1f", r.peak_bytes_per_ref);
+        std::string heap = "-", tr = "-", cpur = "-", cr = "-";
+        if (r.builder != "embree-medium") heap = strprintf("%.1f", r.peak_bytes_per_ref);
         if (have_peer && r.builder != "embree-medium") {
-          std::snprintf(tr, sizeof tr, "%.2f", r.ms / peer.ms);
-          std::snprintf(cpur, sizeof cpur, "%.2f", r.cpu_ms / peer.cpu_ms);
-          std::snprintf(cr, sizeof cr, "%.3f", r.cost / peer.cost);
+          tr = strprintf("%.2f", r.ms / peer.ms);
+          cpur = strprintf("%.2f", r.cpu_ms / peer.cpu_ms);
+          cr = strprintf("%.3f", r.cost / peer.cost);
         }
         std::printf("%-22s %9zu %-15s %3d %10.2f %10.2f %9.2f %9.2f %9.2f %10s %8s %8s %8s\n", scene.c_str(), n,
-                    r.builder.c_str(), threads, r.ms, r.cpu_ms, double(n) / (r.ms * 1e3), r.cost, r.ocost, heap, tr,
-                    cpur, cr);
+                    r.builder.c_str(), threads, r.ms, r.cpu_ms, double(n) / (r.ms * 1e3), r.cost, r.ocost,
+                    heap.c_str(), tr.c_str(), cpur.c_str(), cr.c_str());
         std::fflush(stdout);
         results.push_back(r);
       }
@@ -437,9 +390,7 @@ int run(int argc, char** argv) {
                      {"ocost", r.ocost},
                      {"nodes", r.nodes},
                      {"peak_heap_bytes_per_ref", r.builder == "embree-medium" ? nlohmann::json() : nlohmann::json(r.peak_bytes_per_ref)}});
-    std::ofstream f(opt.json_path);
-    if (!f) throw Error(opt.json_path + ": cannot open for writing");
-    f << out.dump(2) << "\n";
+    write_json(opt.json_path, out);
   }
   return 0;
 }
@@ -448,10 +399,5 @@ int run(int argc, char** argv) {
 }  // namespace bvhopt
 
 int main(int argc, char** argv) {
-  try {
-    return bvhopt::run(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "error: %s\n", e.what());
-    return 1;
-  }
+  return bvhopt::bench::guarded_main("error", [&] { return bvhopt::run(argc, argv); });
 }

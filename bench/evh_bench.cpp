@@ -15,7 +15,6 @@
 // (RayKind::random), both made from the baseline tree. Speed is rays per second over both
 // sets together; times are medians of --repeats runs within this one process.
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -28,8 +27,9 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
-#include <tbb/global_control.h>
 #include <tbb/info.h>
+
+#include "bench_support.h"
 
 #include "bvhopt/build.h"
 #include "bvhopt/cost.h"
@@ -48,10 +48,11 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
+using namespace bench;
 
 struct Options {
-  fs::path scenes_dir;
-  std::vector<std::string> scenes;
+  SceneOptions scene_options = SceneOptions::files_only();
+  std::vector<std::string> scenes;  // the files to run, from scene_options
   std::string json_path;
   std::string fig5_scene;  // default: sponza_dabrovic.obj in the scenes folder
   bool quick = false;
@@ -66,27 +67,21 @@ struct Options {
 
 Options parse(int argc, char** argv) {
   Options o;
-  const char* env = std::getenv("BVHOPT_SCENES");
-  o.scenes_dir = env ? fs::path(env) : fs::path("../shared/scenes");
   bool rays_set = false, repeats_set = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw Error("evh_bench: " + a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--scenes") o.scenes_dir = value();
-    else if (a == "--scene") o.scenes.push_back(value());
-    else if (a == "--json") o.json_path = value();
-    else if (a == "--fig5-scene") o.fig5_scene = value();
+  Args args(argc, argv, "evh_bench");
+  while (args.next()) {
+    const std::string& a = args.current();
+    if (read_scene_option(args, o.scene_options)) continue;
+    if (a == "--json") o.json_path = args.value();
+    else if (a == "--fig5-scene") o.fig5_scene = args.value();
     else if (a == "--quick") o.quick = true;
     else if (a == "--no-fig4") o.fig4 = false;
     else if (a == "--no-fig5") o.fig5 = false;
     else if (a == "--no-table") o.table = false;
-    else if (a == "--rays") o.rays = std::stoull(value()), rays_set = true;
-    else if (a == "--repeats") o.repeats = std::max(1, std::stoi(value())), repeats_set = true;
-    else if (a == "--leaf") o.leaf = static_cast<uint32_t>(std::max(1, std::stoi(value())));
-    else if (a == "--t") o.t = std::stoi(value());
+    else if (a == "--rays") o.rays = std::stoull(args.value()), rays_set = true;
+    else if (a == "--repeats") o.repeats = std::max(1, std::stoi(args.value())), repeats_set = true;
+    else if (a == "--leaf") o.leaf = static_cast<uint32_t>(std::max(1, std::stoi(args.value())));
+    else if (a == "--t") o.t = std::stoi(args.value());
     else if (a == "--help" || a == "-h") {
       std::cout << "evh_bench [--scenes DIR] [--scene FILE]... [--json FILE] [--quick]\n"
                    "          [--rays N] [--repeats R] [--leaf L] [--t T] [--fig5-scene FILE]\n"
@@ -100,22 +95,15 @@ Options parse(int argc, char** argv) {
     if (!rays_set) o.rays = 1u << 15;
     if (!repeats_set) o.repeats = 1;
   }
-  if (o.scenes.empty()) {
-    if (!fs::is_directory(o.scenes_dir)) throw Error(o.scenes_dir.string() + ": scenes folder not found (--scenes)");
-    for (const auto& e : fs::directory_iterator(o.scenes_dir)) {
-      const std::string ext = e.path().extension().string();
-      if (ext == ".obj" || ext == ".ply" || ext == ".glb" || ext == ".gltf") o.scenes.push_back(e.path().string());
-    }
-    std::sort(o.scenes.begin(), o.scenes.end());
-    if (o.quick) {
-      // One architectural and one scanned scene keep the quick run short.
-      std::vector<std::string> keep;
-      for (const auto& s : o.scenes)
-        if (fs::path(s).filename() == "staircase.obj" || fs::path(s).filename() == "bunny.obj") keep.push_back(s);
-      if (!keep.empty()) o.scenes = keep;
-    }
+  o.scenes = scene_specs(o.scene_options);
+  if (o.scene_options.files.empty() && o.quick) {
+    // One architectural and one scanned scene of the folder keep the quick run short.
+    std::vector<std::string> keep;
+    for (const auto& s : o.scenes)
+      if (fs::path(s).filename() == "staircase.obj" || fs::path(s).filename() == "bunny.obj") keep.push_back(s);
+    if (!keep.empty()) o.scenes = keep;
   }
-  if (o.fig5_scene.empty()) o.fig5_scene = (o.scenes_dir / (o.quick ? "staircase.obj" : "sponza_dabrovic.obj")).string();
+  if (o.fig5_scene.empty()) o.fig5_scene = (o.scene_options.dir / (o.quick ? "staircase.obj" : "sponza_dabrovic.obj")).string();
   return o;
 }
 
@@ -133,18 +121,6 @@ std::map<std::string, std::string> read_kinds(const fs::path& dir) {
     if (cols.size() >= 3) kinds[cols[0]] = cols[2];
   }
   return kinds;
-}
-
-double seconds_of(const std::function<void()>& f) {
-  const auto start = std::chrono::steady_clock::now();
-  f();
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 double median_seconds(int repeats, const std::function<void()>& f) {
@@ -276,14 +252,8 @@ Baseline baseline_tree(const Mesh& mesh, uint32_t leaf, int repeats) {
   return b;
 }
 
-std::string fmt(const char* f, double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, f, v);
-  return buf;
-}
-
 int run(const Options& o) {
-  const auto kinds = read_kinds(o.scenes_dir);
+  const auto kinds = read_kinds(o.scene_options.dir);
   const int threads = tbb::info::default_concurrency();
   json out;
   out["machine"] = {{"threads", threads}};
@@ -309,8 +279,7 @@ int run(const Options& o) {
       const EvhTree evh = evh_tree(mesh, o.t, o.leaf, 1);
       // Subdivision against the sweep SAH build, timed alternately (after the untimed runs
       // above) so both see the same load.
-      std::vector<double> build_times, subdivide_times;
-      {
+      auto time_build_and_subdivide = [&](std::vector<double>& build_times, std::vector<double>& subdivide_times) {
         const PrimitiveRefs refs = make_references(mesh);
         EdgeVolumeConfig c;
         c.t = o.t;
@@ -321,22 +290,16 @@ int run(const Options& o) {
           build_times.push_back(seconds_of([&] { build_tree(refs, o.leaf); }));
           for (int k = 0; k < 5; ++k) subdivide_times.push_back(seconds_of([&] { subdivide_edge_volume(mesh, c); }));
         }
-      }
+      };
+      std::vector<double> build_times, subdivide_times;
+      time_build_and_subdivide(build_times, subdivide_times);
       // The same on one thread: the ratio of work, free of the stalls a parallel pass suffers
       // when a worker thread is descheduled on a loaded machine (three short passes here
       // against one long build).
       std::vector<double> build_times1, subdivide_times1;
       {
-        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-        const PrimitiveRefs refs = make_references(mesh);
-        EdgeVolumeConfig c;
-        c.t = o.t;
-        c.max_reference_ratio = 0;
-        for (int r = 0; r < std::max(3, o.repeats); ++r) {
-          build_times1.push_back(seconds_of([&] { build_tree(refs, o.leaf); }));
-          for (int k = 0; k < 5; ++k)
-            subdivide_times1.push_back(seconds_of([&] { subdivide_edge_volume(mesh, c); }));
-        }
+        ThreadLimit one(1);
+        time_build_and_subdivide(build_times1, subdivide_times1);
       }
       const double build_s = median(build_times), subdivide_s = median(subdivide_times);
       const double sub_ratio1 = median(subdivide_times1) / median(build_times1);
@@ -382,27 +345,27 @@ int run(const Options& o) {
       const std::string name = fname + (rotated ? " rotated" : "");
       if (kind == "architectural" && rotated) {
         const bool ok = speed >= 1.5 && evh.stats.ratio <= 1.3;
-        target_lines.push_back((ok ? "MET    " : "MISSED ") + name + ": speed " + fmt("%.2fx", speed) +
-                               " (>= 1.5x), references " + fmt("%.3fx", evh.stats.ratio) + " (<= 1.3x)");
+        target_lines.push_back((ok ? "MET    " : "MISSED ") + name + ": speed " + strprintf("%.2fx", speed) +
+                               " (>= 1.5x), references " + strprintf("%.3fx", evh.stats.ratio) + " (<= 1.3x)");
       }
       if (kind == "scanned" && !rotated) {
         // "No speed loss" within the noise of one run: 3 %.
         const bool ok = evh.stats.ratio < 1.01 && speed >= 0.97;
         target_lines.push_back((ok ? "MET    " : "MISSED ") + name + ": references " +
-                               fmt("%.4fx", evh.stats.ratio) + " (< 1.01x), speed " + fmt("%.2fx", speed) +
+                               strprintf("%.4fx", evh.stats.ratio) + " (< 1.01x), speed " + strprintf("%.2fx", speed) +
                                " (>= 0.97x)");
       }
       {
         const bool ok = sub_ratio1 < 0.05;
         target_lines.push_back((ok ? "MET    " : "MISSED ") + name + ": subdivision " +
-                               fmt("%.2f%%", 100.0 * sub_ratio1) + " of the sweep SAH build on 1 thread (< 5%), " +
-                               fmt("%.2f%%", 100.0 * sub_ratio) + " on all threads");
+                               strprintf("%.2f%%", 100.0 * sub_ratio1) + " of the sweep SAH build on 1 thread (< 5%), " +
+                               strprintf("%.2f%%", 100.0 * sub_ratio) + " on all threads");
       }
       if (evh.stats.references > evh.stats.triangles && (speed < 1.0 || evh.sah > base.sah))
-        target_lines.push_back("LOSES  " + name + ": EVH speed " + fmt("%.2fx", speed) + ", SAH " +
-                               fmt("%.2f", evh.sah) + " vs " + fmt("%.2f", base.sah) + ", triangle tests/ray " +
-                               fmt("%.2f", te.tests) + " vs " + fmt("%.2f", tb.tests) + ", steps/ray " +
-                               fmt("%.2f", te.steps) + " vs " + fmt("%.2f", tb.steps));
+        target_lines.push_back("LOSES  " + name + ": EVH speed " + strprintf("%.2fx", speed) + ", SAH " +
+                               strprintf("%.2f", evh.sah) + " vs " + strprintf("%.2f", base.sah) + ", triangle tests/ray " +
+                               strprintf("%.2f", te.tests) + " vs " + strprintf("%.2f", tb.tests) + ", steps/ray " +
+                               strprintf("%.2f", te.steps) + " vs " + strprintf("%.2f", tb.steps));
     }
   }
   out["scenes"] = rows;
@@ -502,11 +465,7 @@ int run(const Options& o) {
     out["figure5"] = fig5;
   }
 
-  if (!o.json_path.empty()) {
-    std::ofstream f(o.json_path);
-    if (!f) throw Error(o.json_path + ": cannot write (--json)");
-    f << out.dump(2) << "\n";
-  }
+  if (!o.json_path.empty()) write_json(o.json_path, out);
   return 0;
 }
 
@@ -514,10 +473,5 @@ int run(const Options& o) {
 }  // namespace bvhopt
 
 int main(int argc, char** argv) {
-  try {
-    return bvhopt::run(bvhopt::parse(argc, argv));
-  } catch (const std::exception& e) {
-    std::cerr << "evh_bench: " << e.what() << "\n";
-    return 1;
-  }
+  return bvhopt::bench::guarded_main("evh_bench", [&] { return bvhopt::run(bvhopt::parse(argc, argv)); });
 }

@@ -11,19 +11,17 @@
 //
 // Times are the median of --runs runs (the same tree every run: the optimizer is
 // deterministic). "to peer" is the time at which our trace first reaches madmann91's cost.
-#include <tbb/global_control.h>
-
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
+
+#include "bench_support.h"
 
 #include "bvhopt/compaction.h"
 #include "bvhopt/cost.h"
@@ -37,6 +35,7 @@
 namespace {
 
 using namespace bvhopt;
+using namespace bvhopt::bench;
 
 // The table: exact sweep SAH cost, madmann91 (cost, ms), tinybvh (cost, ms).
 struct Peer {
@@ -59,21 +58,8 @@ const std::map<std::string, double>& paper() {
   return table;
 }
 
-double now_seconds() {
-  using namespace std::chrono;
-  return duration<double>(steady_clock::now().time_since_epoch()).count();
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
-
 struct Options {
-  std::string scenes_dir;
-  std::vector<std::string> scenes;
-  bool builtin = true;
-  std::string builtin_spec = "builtin";
+  SceneOptions scenes;
   int runs = 3;
   uint32_t max_passes = 1000;
   double time_limit = 0.0;
@@ -92,7 +78,7 @@ struct OptRun {
 };
 
 OptRun run_optimizer(const Bvh& start, const PrimitiveRefs& refs, InsertionConfig cfg, int threads, int runs) {
-  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+  ThreadLimit limit(threads);
   OptRun out;
   std::vector<double> times;
   for (int r = 0; r < runs; ++r) {
@@ -104,7 +90,7 @@ OptRun run_optimizer(const Bvh& start, const PrimitiveRefs& refs, InsertionConfi
       out.tree = std::move(t);
     }
   }
-  out.seconds = median(times);
+  out.seconds = upper_median(times);
   return out;
 }
 
@@ -129,59 +115,38 @@ std::string stem_of(const std::string& spec) {
   return std::filesystem::path(spec).stem().string();
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+// Unlike the other benches, a bad command line exits with status 2 (an Error from here).
+Options parse(int argc, char** argv) {
   Options opt;
-  if (const char* env = std::getenv("BVHOPT_SCENES")) opt.scenes_dir = env;
-  if (opt.scenes_dir.empty()) opt.scenes_dir = "../shared/scenes";
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::cerr << "insertion_bench: " << a << " needs a value\n";
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--scenes") opt.scenes_dir = next();
-    else if (a == "--scene") opt.scenes.push_back(next());
-    else if (a == "--no-builtin") opt.builtin = false;
-    else if (a == "--builtin") opt.builtin_spec = next();
-    else if (a == "--runs") opt.runs = std::max(1, std::atoi(next().c_str()));
-    else if (a == "--max-passes") opt.max_passes = static_cast<uint32_t>(std::atoi(next().c_str()));
-    else if (a == "--time-limit") opt.time_limit = std::atof(next().c_str());
-    else if (a == "--stop-after") opt.stop_after = static_cast<uint32_t>(std::atoi(next().c_str()));
-    else if (a == "--json") opt.json_path = next();
+  Args args(argc, argv, "insertion_bench");
+  while (args.next()) {
+    const std::string& a = args.current();
+    if (read_scene_option(args, opt.scenes)) continue;
+    if (a == "--runs") opt.runs = std::max(1, std::atoi(args.value().c_str()));
+    else if (a == "--max-passes") opt.max_passes = static_cast<uint32_t>(std::atoi(args.value().c_str()));
+    else if (a == "--time-limit") opt.time_limit = std::atof(args.value().c_str());
+    else if (a == "--stop-after") opt.stop_after = static_cast<uint32_t>(std::atoi(args.value().c_str()));
+    else if (a == "--json") opt.json_path = args.value();
     else if (a == "--no-sequential") opt.sequential = false;
     else if (a == "--no-median") opt.median_start = false;
     else if (a == "--measures") opt.measures = true;
     else if (a == "--quick") opt.quick = true;
-    else {
-      std::cerr << "insertion_bench: unknown option " << a << "\n";
-      return 2;
-    }
+    else throw Error("insertion_bench: unknown option " + a);
   }
   if (opt.quick) opt.sequential = opt.median_start = false;
-  if (opt.scenes.empty()) {
-    std::vector<std::string> files;
-    std::error_code ec;
-    for (const auto& e : std::filesystem::directory_iterator(opt.scenes_dir, ec)) {
-      const std::string ext = e.path().extension().string();
-      if (ext == ".obj" || ext == ".ply" || ext == ".glb" || ext == ".gltf") files.push_back(e.path().string());
-    }
-    if (ec) std::cerr << "insertion_bench: cannot list " << opt.scenes_dir << ": " << ec.message() << "\n";
-    std::sort(files.begin(), files.end());
-    opt.scenes = files;
-  }
-  if (opt.builtin) opt.scenes.push_back(opt.builtin_spec);
+  return opt;
+}
+
+int run(const Options& opt) {
+  // A missing scenes folder only warns: the built-in scene still runs.
+  const std::vector<std::string> specs = scene_specs(opt.scenes, "insertion_bench");
 
   nlohmann::json all = nlohmann::json::array();
   std::printf(
       "%-16s %7s | %8s %7s | %8s %6s %8s %8s %7s %7s %7s | %7s %7s %7s | %8s %6s | %8s %6s | %8s %6s %7s | %8s %8s\n", "scene",
       "tris", "SAH", "build", "ours", "%", "opt 1t", "opt 2t", "2t/bld", "to mm", "to best", "mm %", "mm ms", "tiny %", "seq", "seq s",
       "par", "par s", "median", "% SAH", "med s", "cost", "ocost");
-  for (const std::string& spec : opt.scenes) {
+  for (const std::string& spec : specs) {
     const std::string name = stem_of(spec);
     Mesh mesh;
     try {
@@ -199,14 +164,10 @@ int main(int argc, char** argv) {
     Bvh sweep;
     std::vector<double> build_times;
     {
-      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
-      for (int r = 0; r < opt.runs; ++r) {
-        const double t0 = now_seconds();
-        sweep = build_sweep_sah(refs);
-        build_times.push_back(now_seconds() - t0);
-      }
+      ThreadLimit limit(2);
+      for (int r = 0; r < opt.runs; ++r) build_times.push_back(seconds_of([&] { sweep = build_sweep_sah(refs); }));
     }
-    const double build_s = median(build_times);
+    const double build_s = upper_median(build_times);
     const double sah = sah_cost(sweep);
 
     InsertionConfig cfg;
@@ -243,7 +204,7 @@ int main(int argc, char** argv) {
     if (opt.median_start && !opt.quick) {
       Bvh m;
       {
-        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+        ThreadLimit limit(2);
         m = build_spatial_median(refs);
       }
       med_start = sah_cost(m);
@@ -328,9 +289,19 @@ int main(int argc, char** argv) {
     }
     all.push_back(row);
   }
-  if (!opt.json_path.empty()) {
-    std::ofstream out(opt.json_path);
-    out << all.dump(2) << "\n";
-  }
+  if (!opt.json_path.empty()) write_json(opt.json_path, all);
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options opt;
+  try {
+    opt = parse(argc, argv);
+  } catch (const Error& e) {
+    std::cerr << e.what() << "\n";
+    return 2;
+  }
+  return guarded_main("insertion_bench", [&] { return run(opt); });
 }

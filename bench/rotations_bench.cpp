@@ -13,21 +13,17 @@
 // Hill-climbing times are the median of --runs runs on 2 threads (and on 1 for the
 // speedup); annealing runs once per thread count and h (it takes seconds, and the tree is
 // the same on every thread count, which the program checks).
-#include <tbb/global_control.h>
-
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
-#include <ctime>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <map>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
 #include <vector>
+
+#include "bench_support.h"
 
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
@@ -40,11 +36,10 @@
 namespace bvhopt {
 namespace {
 
+using namespace bench;
+
 struct Options {
-  std::filesystem::path scenes_dir;
-  std::vector<std::string> scenes;
-  bool builtin = true;
-  std::string builtin_spec = "builtin";
+  SceneOptions scenes;
   int runs = 3;
   std::vector<double> hs{AnnealConfig{}.h};
   uint32_t schedule_passes = AnnealConfig{}.schedule_passes;
@@ -56,41 +51,23 @@ struct Options {
   std::string json_path;
 };
 
-std::vector<std::string> split_list(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
 Options parse(int argc, char** argv) {
   Options o;
-  if (const char* env = std::getenv("BVHOPT_SCENES"); env && *env)
-    o.scenes_dir = env;
-  else
-    o.scenes_dir = "../shared/scenes";
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw Error("rotations_bench: option " + a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--scenes") o.scenes_dir = value();
-    else if (a == "--scene") o.scenes.push_back(value());
-    else if (a == "--no-builtin") o.builtin = false;
-    else if (a == "--builtin") o.builtin_spec = value();
-    else if (a == "--runs") o.runs = std::max(1, std::stoi(value()));
-    else if (a == "--schedule-passes") o.schedule_passes = std::stoul(value());
+  Args args(argc, argv, "rotations_bench");
+  while (args.next()) {
+    const std::string& a = args.current();
+    if (read_scene_option(args, o.scenes)) continue;
+    if (a == "--runs") o.runs = std::max(1, std::stoi(args.value()));
+    else if (a == "--schedule-passes") o.schedule_passes = std::stoul(args.value());
     else if (a == "--no-anneal") o.anneal = false;
     else if (a == "--no-nonzero-variant") o.nonzero_variant = false;
-    else if (a == "--json") o.json_path = value();
+    else if (a == "--json") o.json_path = args.value();
     else if (a == "--h") {
       o.hs.clear();
-      for (auto& h : split_list(value())) o.hs.push_back(std::stod(h));
+      for (auto& h : split_list(args.value())) o.hs.push_back(std::stod(h));
     } else if (a == "--anneal-threads") {
       o.anneal_threads.clear();
-      for (auto& t : split_list(value())) o.anneal_threads.push_back(std::max(1, std::stoi(t)));
+      for (auto& t : split_list(args.value())) o.anneal_threads.push_back(std::max(1, std::stoi(t)));
     } else if (a == "--help" || a == "-h") {
       std::cout << "rotations_bench [--scenes DIR] [--scene SPEC]... [--no-builtin] [--builtin SPEC] [--runs 3]\n"
                    "                [--h 1.0[,1.5,...]] [--schedule-passes 1250] [--anneal-threads 1,2]\n"
@@ -101,28 +78,6 @@ Options parse(int argc, char** argv) {
     }
   }
   return o;
-}
-
-std::vector<std::string> scene_list(const Options& o) {
-  std::vector<std::string> specs = o.scenes;
-  if (specs.empty()) {
-    if (!std::filesystem::is_directory(o.scenes_dir))
-      throw Error(o.scenes_dir.string() + ": scenes folder not found (set BVHOPT_SCENES or pass --scenes DIR)");
-    for (const auto& e : std::filesystem::directory_iterator(o.scenes_dir)) {
-      std::string ext = e.path().extension().string();
-      if (e.is_regular_file() && (ext == ".obj" || ext == ".ply" || ext == ".glb" || ext == ".gltf"))
-        specs.push_back(e.path().string());
-    }
-    std::sort(specs.begin(), specs.end());
-  }
-  if (o.builtin) specs.push_back(o.builtin_spec);
-  return specs;
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  size_t m = v.size() / 2;
-  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
 }
 
 // Kensler's Table 1: cost ratios after hill climbing and annealing, and annealing seconds
@@ -185,15 +140,16 @@ SceneResult run_scene(const Mesh& mesh, const std::string& name, const Options& 
   r.scene = name;
   r.triangles = mesh.triangle_count();
   PrimitiveRefs refs = make_references(mesh);
-  auto t0 = std::chrono::steady_clock::now();
-  SweepSahConfig sweep;
-  sweep.leaf.max_leaf_size = 1;
-  const Bvh start = build_sweep_sah(refs, sweep);
-  r.build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  Bvh start;
+  r.build_s = seconds_of([&] {
+    SweepSahConfig sweep;
+    sweep.leaf.max_leaf_size = 1;
+    start = build_sweep_sah(refs, sweep);
+  });
   r.cost0 = sah_cost(start);
 
   for (int threads : {2, 1}) {
-    tbb::global_control gc(tbb::global_control::max_allowed_parallelism, threads);
+    ThreadLimit limit(threads);
     std::vector<double> times;
     for (int i = 0; i < o.runs; ++i) {
       Bvh bvh = start;
@@ -213,14 +169,14 @@ SceneResult run_scene(const Mesh& mesh, const std::string& name, const Options& 
     for (double h : o.hs) {
       double first_cost = -1.0;
       for (int threads : o.anneal_threads) {
-        tbb::global_control gc(tbb::global_control::max_allowed_parallelism, threads);
+        ThreadLimit limit(threads);
         Bvh bvh = start;
         AnnealConfig cfg;
         cfg.h = h;
         cfg.schedule_passes = o.schedule_passes;
-        const std::clock_t c0 = std::clock();
+        const double c0 = process_cpu_seconds();
         OptimizeReport rep = anneal(bvh, cfg);
-        const double cpu = double(std::clock() - c0) / CLOCKS_PER_SEC;
+        const double cpu = process_cpu_seconds() - c0;
         AnnealRun a{h, threads, rep.final_cost, rep.seconds, cpu, rep.passes, rep.moves};
         if (first_cost < 0) first_cost = rep.final_cost;
         else if (rep.final_cost != first_cost) r.same_tree_on_thread_counts = false;
@@ -294,10 +250,10 @@ nlohmann::json to_json(const std::vector<SceneResult>& results) {
 
 int main(int argc, char** argv) {
   using namespace bvhopt;
-  try {
+  return guarded_main("rotations_bench", [&] {
     Options o = parse(argc, argv);
     std::vector<SceneResult> results;
-    for (const std::string& spec : scene_list(o)) {
+    for (const std::string& spec : scene_specs(o.scenes)) {
       std::fprintf(stderr, "%s ...\n", spec.c_str());
       const Mesh mesh = load_scene(spec);
       std::vector<std::pair<const Mesh*, std::string>> variants{{&mesh, stem(spec)}};
@@ -314,14 +270,7 @@ int main(int argc, char** argv) {
       }
     }
     print_table(results, o);
-    if (!o.json_path.empty()) {
-      std::ofstream f(o.json_path);
-      if (!f) throw Error(o.json_path + ": cannot write");
-      f << to_json(results).dump(2) << "\n";
-    }
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "rotations_bench: %s\n", e.what());
-    return 1;
-  }
-  return 0;
+    if (!o.json_path.empty()) write_json(o.json_path, to_json(results));
+    return 0;
+  });
 }

@@ -19,7 +19,6 @@
 // own core), so 2t/1t measures parallel efficiency; --wall gives true wall times, which
 // mean something only on an otherwise idle machine.
 #include <tbb/blocked_range.h>
-#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
 #ifdef BVHOPT_HAVE_EMBREE
@@ -27,22 +26,20 @@
 #endif
 
 #include <algorithm>
-#include <chrono>
-#include <ctime>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <memory>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
+
+#include "bench_support.h"
 
 #include "bvhopt/build.h"
 #include "bvhopt/compaction.h"
@@ -61,10 +58,11 @@ namespace bvhopt {
 namespace {
 
 namespace fs = std::filesystem;
+using namespace bench;
 
 struct Options {
-  fs::path scenes_dir;
-  std::vector<std::string> scenes;
+  SceneOptions scene_options = SceneOptions::files_only();
+  std::vector<std::string> scenes;  // the files to run, from scene_options
   uint64_t count = 1'000'000;
   int repeats = 5;
   std::vector<RayKind> kinds{RayKind::primary, RayKind::random, RayKind::ao};
@@ -79,38 +77,24 @@ struct Options {
   std::string json_path;
 };
 
-std::vector<std::string> split_list(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
 Options parse(int argc, char** argv) {
   Options o;
-  const char* env = std::getenv("BVHOPT_SCENES");
-  o.scenes_dir = env ? fs::path(env) : fs::path("../shared/scenes");
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw Error("trace_bench: " + a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--scenes") o.scenes_dir = value();
-    else if (a == "--scene") o.scenes.push_back(value());
-    else if (a == "--count") o.count = std::stoull(value());
-    else if (a == "--repeats") o.repeats = std::max(1, std::stoi(value()));
-    else if (a == "--json") o.json_path = value();
+  Args args(argc, argv, "trace_bench");
+  while (args.next()) {
+    const std::string& a = args.current();
+    if (read_scene_option(args, o.scene_options)) continue;
+    if (a == "--count") o.count = std::stoull(args.value());
+    else if (a == "--repeats") o.repeats = std::max(1, std::stoi(args.value()));
+    else if (a == "--json") o.json_path = args.value();
     else if (a == "--optimizers") o.optimizers = true;
     else if (a == "--quick") o.quick = true;
     else if (a == "--wall") o.wall = true;
-    else if (a == "--opt-seconds") o.opt_seconds = std::stod(value());
-    else if (a == "--best-seconds") o.best_seconds = std::stod(value());
-    else if (a == "--best-leaf") o.best_leaf = static_cast<uint32_t>(std::stoul(value()));
+    else if (a == "--opt-seconds") o.opt_seconds = std::stod(args.value());
+    else if (a == "--best-seconds") o.best_seconds = std::stod(args.value());
+    else if (a == "--best-leaf") o.best_leaf = static_cast<uint32_t>(std::stoul(args.value()));
     else if (a == "--kinds") {
       o.kinds.clear();
-      for (const std::string& k : split_list(value())) {
+      for (const std::string& k : split_list(args.value())) {
         auto kind = parse_ray_kind(k);
         if (!kind) throw Error("trace_bench: unknown ray kind '" + k + "'");
         o.kinds.push_back(*kind);
@@ -126,32 +110,17 @@ Options parse(int argc, char** argv) {
       throw Error("trace_bench: unknown option '" + a + "'");
     }
   }
-  if (o.scenes.empty()) {
-    if (!fs::is_directory(o.scenes_dir)) throw Error(o.scenes_dir.string() + ": scenes folder not found (--scenes)");
-    for (const auto& e : fs::directory_iterator(o.scenes_dir)) {
-      const std::string ext = e.path().extension().string();
-      if (ext == ".obj" || ext == ".ply" || ext == ".glb" || ext == ".gltf") o.scenes.push_back(e.path().string());
-    }
-    std::sort(o.scenes.begin(), o.scenes.end());
-  }
+  o.scenes = scene_specs(o.scene_options);
   return o;
-}
-
-double seconds_of(const std::function<void()>& f) {
-  const auto start = std::chrono::steady_clock::now();
-  f();
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 // CPU time of the calling thread. With one thread allowed, oneTBB runs the whole
 // parallel_for on the calling thread, so this is the work of the trace alone, robust to the
 // machine being shared (wall time counts the time other processes hold the core).
 double thread_cpu_seconds_of(const std::function<void()>& f) {
-  timespec a{}, b{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
+  const double a = thread_cpu_seconds();
   f();
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
-  return double(b.tv_sec - a.tv_sec) + 1e-9 * double(b.tv_nsec - a.tv_nsec);
+  return thread_cpu_seconds() - a;
 }
 
 // For a pass on T threads: the process's CPU time over T, i.e. the wall time the pass would
@@ -159,16 +128,9 @@ double thread_cpu_seconds_of(const std::function<void()>& f) {
 // the other processes; this measures our parallel work, overheads included (idle workers
 // spinning count against us).
 double process_cpu_seconds_of(const std::function<void()>& f, int threads) {
-  timespec a{}, b{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &a);
+  const double a = process_cpu_seconds();
   f();
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &b);
-  return (double(b.tv_sec - a.tv_sec) + 1e-9 * double(b.tv_nsec - a.tv_nsec)) / threads;
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
+  return (process_cpu_seconds() - a) / threads;
 }
 
 double pearson(const std::vector<double>& x, const std::vector<double>& y) {
@@ -436,7 +398,7 @@ int run(const Options& opt) {
       std::vector<Hit> hits;
       for (int r = 0; r < opt.repeats; ++r)
         for (Candidate& c : cands) {
-          tbb::global_control limit(tbb::global_control::max_allowed_parallelism, c.threads);
+          ThreadLimit limit(c.threads);
           if (opt.wall)
             c.times.push_back(seconds_of([&] { c.trace(hits); }));
           else if (c.threads == 1)
@@ -446,13 +408,13 @@ int run(const Options& opt) {
         }
       auto mrays = [&](const std::string& label) {
         for (const Candidate& c : cands)
-          if (c.label == label) return double(rays.size()) / median(c.times) / 1e6;
+          if (c.label == label) return double(rays.size()) / upper_median(c.times) / 1e6;
         return 0.0;
       };
 
       RayMeasurement m;
       {
-        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+        ThreadLimit limit(2);
         m = measure_rays(*base, rays, set.query, {.repeats = 1});
       }
       double agree = std::nan("");
@@ -506,11 +468,7 @@ int run(const Options& opt) {
       std::fflush(stdout);
     }
   }
-  if (!opt.json_path.empty()) {
-    std::ofstream f(opt.json_path);
-    f << out.dump(2) << "\n";
-    if (!f) throw Error(opt.json_path + ": cannot write");
-  }
+  if (!opt.json_path.empty()) write_json(opt.json_path, out);
   return 0;
 }
 
@@ -518,10 +476,5 @@ int run(const Options& opt) {
 }  // namespace bvhopt
 
 int main(int argc, char** argv) {
-  try {
-    return bvhopt::run(bvhopt::parse(argc, argv));
-  } catch (const bvhopt::Error& e) {
-    std::fprintf(stderr, "trace_bench: %s\n", e.what());
-    return 1;
-  }
+  return bvhopt::bench::guarded_main("trace_bench", [&] { return bvhopt::run(bvhopt::parse(argc, argv)); });
 }
