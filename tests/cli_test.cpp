@@ -7,48 +7,16 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <set>
+
+#include "test_support.h"
 #include <string>
 
 namespace fs = std::filesystem;
 
 namespace {
 
-struct CliRun {
-  int exit_code;
-  std::string out, err;
-};
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-class Cli : public ::testing::Test {
- protected:
-  void SetUp() override {
-    const char* bin = std::getenv("BVHOPT_BIN_DIR");
-    if (!bin) GTEST_SKIP() << "BVHOPT_BIN_DIR not set (run through ctest)";
-    exe_ = fs::path(bin) / "bvhopt";
-    if (!fs::exists(exe_)) GTEST_SKIP() << "bvhopt program not built";
-    dir_ = fs::temp_directory_path() /
-           ("bvhopt_cli_test_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    if (!dir_.empty()) fs::remove_all(dir_);
-  }
-  CliRun run(const std::string& args) {
-    fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-    std::string cmd = exe_.string() + " " + args + " >" + out.string() + " 2>" + err.string() + " </dev/null";
-    int status = std::system(cmd.c_str());
-    return {WEXITSTATUS(status), slurp(out), slurp(err)};
-  }
-  fs::path exe_, dir_;
-};
+using CliRun = bvhopt::testing::ProgramTest::Result;
+using Cli = bvhopt::testing::ProgramTest;
 
 TEST_F(Cli, HelpListsTheSubcommands) {
   CliRun r = run("--help");

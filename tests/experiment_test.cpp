@@ -85,12 +85,7 @@ double value(const std::map<std::string, std::string>& row, const std::string& k
   return it == row.end() ? NAN : std::stod(it->second);
 }
 
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using testing::read_text;
 
 // The whole run, shared by the tests that read it (it is the slow part).
 class ExperimentRun : public ::testing::Test {

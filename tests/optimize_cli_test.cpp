@@ -13,43 +13,23 @@
 #include "bvhopt/bvh_file.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/validate.h"
+#include "test_support.h"
 
 namespace fs = std::filesystem;
 
 namespace bvhopt {
 namespace {
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+std::string slurp(const fs::path& p) { return testing::read_text(p); }
 
-class OptimizeCli : public ::testing::Test {
+class OptimizeCli : public testing::ProgramTest {
  protected:
-  void SetUp() override {
-    const char* bin = std::getenv("BVHOPT_BIN_DIR");
-    if (!bin) GTEST_SKIP() << "BVHOPT_BIN_DIR not set (run through ctest)";
-    exe_ = fs::path(bin) / "bvhopt";
-    if (!fs::exists(exe_)) GTEST_SKIP() << "bvhopt program not built";
-    dir_ = fs::temp_directory_path() / ("bvhopt_optimize_cli_test_" +
-                                        std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    if (!dir_.empty()) fs::remove_all(dir_);
-  }
   int run(const std::string& args, std::string* out = nullptr, std::string* err = nullptr) {
-    fs::path o = dir_ / "stdout.txt", e = dir_ / "stderr.txt";
-    std::string cmd = exe_.string() + " " + args + " >" + o.string() + " 2>" + e.string() + " </dev/null";
-    int status = std::system(cmd.c_str());
-    if (out) *out = slurp(o);
-    if (err) *err = slurp(e);
-    return WEXITSTATUS(status);
+    Result r = ProgramTest::run(args);
+    if (out) *out = r.out;
+    if (err) *err = r.err;
+    return r.exit_code;
   }
-  fs::path exe_, dir_;
 };
 
 std::vector<std::string> lines(const std::string& s) {

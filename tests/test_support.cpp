@@ -1,6 +1,11 @@
 #include "test_support.h"
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <cstdlib>
+#include <fstream>
+#include <sstream>
 #include <limits>
 #include <vector>
 
@@ -93,6 +98,36 @@ std::string tree_signature(const Bvh& bvh, const PrimitiveRefs& refs) {
     return s;
   };
   return rec(rec, bvh.root);
+}
+
+std::string read_text(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+void ProgramTest::SetUp() {
+  const char* bin = std::getenv("BVHOPT_BIN_DIR");
+  if (!bin) GTEST_SKIP() << "BVHOPT_BIN_DIR not set (run through ctest)";
+  exe_ = std::filesystem::path(bin) / "bvhopt";
+  if (!std::filesystem::exists(exe_)) GTEST_SKIP() << "bvhopt program not built";
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  dir_ = std::filesystem::temp_directory_path() /
+         ("bvhopt_" + std::string(info->test_suite_name()) + "_" + info->name() + "_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir_);
+  std::filesystem::create_directories(dir_);
+}
+
+void ProgramTest::TearDown() {
+  if (!dir_.empty()) std::filesystem::remove_all(dir_);
+}
+
+ProgramTest::Result ProgramTest::run(const std::string& args) {
+  const std::filesystem::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
+  const std::string cmd = exe_.string() + " " + args + " >" + out.string() + " 2>" + err.string() + " </dev/null";
+  const int status = std::system(cmd.c_str());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status), read_text(out), read_text(err)};
 }
 
 }  // namespace bvhopt::testing

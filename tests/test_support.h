@@ -6,6 +6,8 @@
 #include <random>
 #include <string>
 
+#include <gtest/gtest.h>
+
 #include "bvhopt/bvh.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/references.h"
@@ -29,5 +31,26 @@ double optimal_tree_cost(const PrimitiveRefs& refs, double c_t, double c_i);
 // A tree in which each node's children appear in the same order, as a string such as
 // "((0,1),2)" of triangle ids: two trees are the same tree exactly when the strings match.
 std::string tree_signature(const Bvh& bvh, const PrimitiveRefs& refs);
+
+// The whole contents of a file ("" when it cannot be read).
+std::string read_text(const std::filesystem::path& path);
+
+// A test that runs the bvhopt program (ctest passes its folder in BVHOPT_BIN_DIR) inside a
+// fresh temporary folder `dir_`, removed afterwards. Skipped when the program is not there.
+class ProgramTest : public ::testing::Test {
+ public:
+  struct Result {
+    int exit_code = 0;
+    std::string out, err;
+  };
+
+ protected:
+  void SetUp() override;
+  void TearDown() override;
+  // Runs `bvhopt ARGS` through the shell (ARGS may quote), with no standard input.
+  Result run(const std::string& args);
+
+  std::filesystem::path exe_, dir_;
+};
 
 }  // namespace bvhopt::testing

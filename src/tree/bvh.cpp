@@ -28,38 +28,33 @@ void Bvh::refit(const PrimitiveRefs& refs) {
   }
 }
 
-std::vector<uint32_t> Bvh::depth_first_order() const {
+namespace {
+
+// Pre-order from the root; `left_first` picks which child comes first.
+std::vector<uint32_t> pre_order(const Bvh& bvh, bool left_first) {
   std::vector<uint32_t> order;
-  if (empty()) return order;
-  order.reserve(nodes.size());
-  std::vector<uint32_t> stack{root};
+  if (bvh.empty()) return order;
+  order.reserve(bvh.nodes.size());
+  std::vector<uint32_t> stack{bvh.root};
   while (!stack.empty()) {
     uint32_t n = stack.back();
     stack.pop_back();
     order.push_back(n);
-    if (!nodes[n].is_leaf()) {
-      stack.push_back(nodes[n].right());
-      stack.push_back(nodes[n].left());
+    if (!bvh[n].is_leaf()) {
+      stack.push_back(left_first ? bvh[n].right() : bvh[n].left());
+      stack.push_back(left_first ? bvh[n].left() : bvh[n].right());
     }
   }
   return order;
 }
 
+}  // namespace
+
+std::vector<uint32_t> Bvh::depth_first_order() const { return pre_order(*this, true); }
+
 std::vector<uint32_t> Bvh::post_order() const {
-  // Reverse of a pre-order that visits right before left is a post-order visiting left first.
-  std::vector<uint32_t> order;
-  if (empty()) return order;
-  order.reserve(nodes.size());
-  std::vector<uint32_t> stack{root};
-  while (!stack.empty()) {
-    uint32_t n = stack.back();
-    stack.pop_back();
-    order.push_back(n);
-    if (!nodes[n].is_leaf()) {
-      stack.push_back(nodes[n].left());
-      stack.push_back(nodes[n].right());
-    }
-  }
+  // Reversed, a pre-order that visits right before left is a post-order visiting left first.
+  std::vector<uint32_t> order = pre_order(*this, false);
   return {order.rbegin(), order.rend()};
 }
 
