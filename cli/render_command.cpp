@@ -48,8 +48,11 @@ void register_render_command(CLI::App& app) {
   cmd->add_flag("--json", opt->json, "Print a summary as JSON");
   cmd->callback([opt] {
     auto threads = opt->threads.apply();
+    ProgressLine progress;
+    progress.update("loading " + opt->scene.spec + " and " + opt->bvh_file, true);
     const Mesh mesh = opt->scene.load();
     const LoadedTree tree = load_tree_for_scene(opt->bvh_file, mesh);
+    progress.finish();
     const ChildOrder order = opt->order == "distance" ? ChildOrder::distance : ChildOrder::split_axis;
     const Camera cam = opt->camera.resolve(mesh, *tree.tracer, opt->width, opt->height);
     const std::vector<Ray> rays = camera_rays(cam);

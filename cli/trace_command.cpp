@@ -75,10 +75,13 @@ void register_trace_command(CLI::App& app) {
   cmd->add_flag("--json", opt->json, "Print the results as JSON");
   cmd->callback([opt] {
     auto threads = opt->threads.apply();
+    ProgressLine progress;
+    progress.update("loading " + opt->scene.spec + " and " + opt->bvh_file, true);
     const Mesh mesh = opt->scene.load();
     const LoadedTree tree = load_tree_for_scene(opt->bvh_file, mesh);
     const ChildOrder order = opt->order == "distance" ? ChildOrder::distance : ChildOrder::split_axis;
 
+    progress.update("making " + opt->rays + " rays", true);
     RaySet set;
     if (!opt->load_rays.empty()) {
       set = read_ray_file(opt->load_rays);
@@ -96,6 +99,7 @@ void register_trace_command(CLI::App& app) {
     if (!opt->save_rays.empty()) write_ray_file(opt->save_rays, set);
     if (set.rays.empty()) throw Error("trace: the ray set is empty");
 
+    progress.update("tracing " + std::to_string(set.rays.size()) + " rays on 1 thread", true);
     MeasureOptions one;
     one.order = order;
     one.threads = 1;
@@ -103,10 +107,15 @@ void register_trace_command(CLI::App& app) {
     const RayMeasurement m1 = measure_rays(*tree.tracer, set.rays, set.query, one);
     MeasureOptions all = one;
     all.threads = opt->threads.effective();
+    progress.update("tracing " + std::to_string(set.rays.size()) + " rays on " + std::to_string(all.threads) + " threads",
+                    true);
     const RayMeasurement mn = measure_rays(*tree.tracer, set.rays, set.query, all);
     std::optional<BruteForceCheck> check;
-    if (opt->check > 0)
+    if (opt->check > 0) {
+      progress.update("checking " + std::to_string(opt->check) + " rays against brute force", true);
       check = check_against_brute_force(*tree.tracer, mesh, set.rays, set.query, opt->check, opt->seed, order);
+    }
+    progress.finish();
 
     if (opt->json) {
       nlohmann::json j = {{"bvh", opt->bvh_file},
