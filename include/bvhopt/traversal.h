@@ -83,6 +83,8 @@ class Tracer {
  private:
   template <ChildOrder kOrder, bool kAny>
   bool traverse(const Ray& ray, Hit& hit, TraceCounters& counters, void* stack) const;
+  template <bool kAny>
+  bool run(const Ray& ray, Hit& hit, TraceCounters& counters, ChildOrder order) const;
 
   std::vector<TraceNode> nodes_;
   std::vector<float> vertices_;  // 9 floats per leaf entry

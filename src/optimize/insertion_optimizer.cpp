@@ -224,22 +224,7 @@ class InsertionOptimizer {
   }
 
   // Figure 3: N and its parent P leave the tree, N's sibling takes P's place.
-  void remove(uint32_t n) {
-    const uint32_t p = bvh_[n].parent;
-    const uint32_t s = bvh_.sibling(n);
-    const uint32_t g = bvh_[p].parent;
-    inner_area_ -= static_cast<double>(bvh_[n].area) + bvh_[p].area;
-    if (g == kInvalidNode) {
-      bvh_.root = s;
-      bvh_[s].parent = kInvalidNode;
-    } else {
-      bvh_[g].set_child(bvh_.child_slot(p), s);
-      bvh_[s].parent = g;
-      refit_up(g);
-    }
-    bvh_[n].parent = kInvalidNode;
-    bvh_[p].parent = kInvalidNode;
-  }
+  void remove(uint32_t n) { detach(n, bvh_[n].area); }
 
   // Figure 5: `free_node` becomes the parent of X and L, in X's old place.
   void insert(uint32_t l, uint32_t x, uint32_t free_node) {
@@ -285,11 +270,12 @@ class InsertionOptimizer {
 
   // Takes `m` and its parent out (the parent becomes free, the sibling takes its place);
   // m keeps its subtree.
-  uint32_t detach(uint32_t m) {
+  // `also_removed`: the area of m itself when m leaves the tree's inner nodes too (remove).
+  uint32_t detach(uint32_t m, double also_removed = 0.0) {
     const uint32_t p = bvh_[m].parent;
     const uint32_t s = bvh_.sibling(m);
     const uint32_t g = bvh_[p].parent;
-    inner_area_ -= bvh_[p].area;
+    inner_area_ -= also_removed + bvh_[p].area;
     if (g == kInvalidNode) {
       bvh_.root = s;
       bvh_[s].parent = kInvalidNode;

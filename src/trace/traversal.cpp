@@ -337,8 +337,10 @@ done:
   return found;
 }
 
-Hit Tracer::closest(const Ray& ray, TraceCounters& counters, ChildOrder order) const {
-  Hit hit;
+template <bool kAny>
+bool Tracer::run(const Ray& ray, Hit& hit, TraceCounters& counters, ChildOrder order) const {
+  // A fixed stack on the C stack serves every tree up to kFixedStack deep; deeper (rare,
+  // degenerate) trees get one sized to their depth.
   StackEntry fixed[kFixedStack];
   std::vector<StackEntry> heap;
   void* stack = fixed;
@@ -346,24 +348,19 @@ Hit Tracer::closest(const Ray& ray, TraceCounters& counters, ChildOrder order) c
     heap.resize(depth_ + 1);
     stack = heap.data();
   }
-  if (order == ChildOrder::distance)
-    traverse<ChildOrder::distance, false>(ray, hit, counters, stack);
-  else
-    traverse<ChildOrder::split_axis, false>(ray, hit, counters, stack);
+  if (order == ChildOrder::distance) return traverse<ChildOrder::distance, kAny>(ray, hit, counters, stack);
+  return traverse<ChildOrder::split_axis, kAny>(ray, hit, counters, stack);
+}
+
+Hit Tracer::closest(const Ray& ray, TraceCounters& counters, ChildOrder order) const {
+  Hit hit;
+  run<false>(ray, hit, counters, order);
   return hit;
 }
 
 bool Tracer::any(const Ray& ray, TraceCounters& counters, ChildOrder order) const {
   Hit hit;
-  StackEntry fixed[kFixedStack];
-  std::vector<StackEntry> heap;
-  void* stack = fixed;
-  if (depth_ >= kFixedStack) {
-    heap.resize(depth_ + 1);
-    stack = heap.data();
-  }
-  if (order == ChildOrder::distance) return traverse<ChildOrder::distance, true>(ray, hit, counters, stack);
-  return traverse<ChildOrder::split_axis, true>(ray, hit, counters, stack);
+  return run<true>(ray, hit, counters, order);
 }
 
 Hit brute_force_closest(const Mesh& mesh, const Ray& ray) {
