@@ -23,7 +23,7 @@
 
 #include "bench_support.h"
 
-#include "bvhopt/compaction.h"
+#include "bvhopt/collapse_leaves.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
 #include "bvhopt/insertion_optimizer.h"
@@ -211,7 +211,7 @@ int run(const Options& opt) {
       med = run_optimizer(m, refs, cfg, 2, 1);
     }
     Bvh compacted = p2.tree;
-    CompactionResult comp = compact_leaves(compacted);
+    CollapseResult comp = collapse_leaves(compacted);
     const double sah_ocost = optimal_collapse_cost(sweep);
 
     std::printf(

@@ -42,7 +42,7 @@
 #include "bench_support.h"
 
 #include "bvhopt/build.h"
-#include "bvhopt/compaction.h"
+#include "bvhopt/collapse_leaves.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
 #include "bvhopt/finalize.h"
@@ -324,9 +324,9 @@ int run(const Options& opt) {
         InsertionConfig c;
         c.time_limit_seconds = opt.best_seconds;
         optimize_insertion(bvh, c);
-        CompactionConfig cc;
+        CollapseConfig cc;
         cc.max_leaf_size = opt.best_leaf;
-        compact_leaves(bvh, cc);
+        collapse_leaves(bvh, cc);
       });
       add_tree("best", std::move(bvh), s);
     }

@@ -3,7 +3,7 @@
 #include <iostream>
 
 #include "bvhopt/bvh_file.h"
-#include "bvhopt/compaction.h"
+#include "bvhopt/collapse_leaves.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
 #include "bvhopt/leaf_dedup.h"
@@ -36,10 +36,10 @@ void register_compact_command(CLI::App& app) {
     const double ocost_before = optimal_collapse_cost(file.bvh, cost, opt->max_leaf_size);
 
     Stopwatch clock;
-    CompactionConfig cfg;
+    CollapseConfig cfg;
     cfg.cost = cost;
     cfg.max_leaf_size = opt->max_leaf_size;
-    CompactionResult r = compact_leaves(file.bvh, cfg);
+    CollapseResult r = collapse_leaves(file.bvh, cfg);
     // A tree over subdivided references (--evh) may now hold one triangle twice in a
     // leaf; keep one. Without subdivision this changes nothing.
     dedup_leaf_references(file.bvh, file.refs);

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "bvhopt/build.h"
-#include "bvhopt/compaction.h"
+#include "bvhopt/collapse_leaves.h"
 #include "bvhopt/finalize.h"
 #include "bvhopt/images.h"
 #include "bvhopt/insertion_optimizer.h"
@@ -178,9 +178,9 @@ void register_demo_command(CLI::App& app) {
       OptimizeReport r = optimize_insertion(bvh, config, on_pass("sweep+insertion"));
       measure("sweep+insertion", sweep_s + r.seconds, bvh);
       Stopwatch clock;
-      CompactionConfig cc;
+      CollapseConfig cc;
       cc.cost = model;
-      compact_leaves(bvh, cc);
+      collapse_leaves(bvh, cc);
       measure("sweep+insertion+compact", sweep_s + r.seconds + clock.seconds(), bvh);
     }
     progress.finish();

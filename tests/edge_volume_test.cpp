@@ -422,7 +422,7 @@ TEST(LeafDedup, UnsubdividedTreeIsUnchanged) {
   const PrimitiveRefs refs = make_references(mesh);
   Bvh bvh = build_over(refs);
   Bvh copy = bvh;
-  copy.compact();
+  copy.renumber_depth_first();
   const LeafDedupStats s = dedup_leaf_references(bvh, refs);
   EXPECT_EQ(s.leaves_changed, 0u);
   EXPECT_EQ(bvh.ref_indices, copy.ref_indices);

@@ -19,7 +19,7 @@
 #include "bvhopt/tree_rotations.h"
 #include "bvhopt/insertion_optimizer.h"
 
-#include "bvhopt/compaction.h"
+#include "bvhopt/collapse_leaves.h"
 #include "bvhopt/leaf_dedup.h"
 #include "bvhopt/finalize.h"
 

@@ -21,7 +21,7 @@ struct LeafDedupStats {
 // In each leaf, keeps the first slot of every triangle id (slot order, so deterministic)
 // and drops the others; leaf boxes are left as they are, the union of all the pieces the
 // leaf held, because the kept reference now stands for the triangle's part in all of them.
-// Then bvh.compact() (the tree is renumbered depth-first, as every optimizer leaves it).
+// Then bvh.renumber_depth_first() (the tree is renumbered depth-first, as every optimizer leaves it).
 // Run it last, after every optimizer and before finalize: a later Bvh::refit would shrink
 // the leaf boxes to the kept pieces' boxes and lose the others' parts of the triangle.
 // The tree then no longer passes validate() (dropped references appear in no leaf); check

@@ -10,7 +10,7 @@
 #include <thread>
 
 #include "bvhopt/build.h"
-#include "bvhopt/compaction.h"
+#include "bvhopt/collapse_leaves.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/edge_volume_subdivision.h"
 #include "bvhopt/error.h"
@@ -198,9 +198,9 @@ const RayKind kTableRayKinds[] = {RayKind::primary, RayKind::random, RayKind::ao
 // A tree made ready for tracing: compacted to leaves of up to kTracedLeafSize references.
 Tracer make_tracer(const Bvh& bvh, const PrimitiveRefs& refs, const Mesh& mesh) {
   Bvh copy = bvh;
-  CompactionConfig cc;
+  CollapseConfig cc;
   cc.max_leaf_size = kTracedLeafSize;
-  compact_leaves(copy, cc);
+  collapse_leaves(copy, cc);
   return Tracer(finalize(copy, refs), mesh);
 }
 

@@ -51,8 +51,8 @@ LeafDedupStats dedup_leaf_references(Bvh& bvh, const PrimitiveRefs& refs) {
     // The box stays: it still bounds the leaf's part of every triangle it held.
     node.make_leaf(first, kept);
   }
-  // compact() copies only the slots leaves use, so the dropped ones disappear.
-  bvh.compact();
+  // renumber_depth_first() copies only the slots leaves use, so the dropped ones disappear.
+  bvh.renumber_depth_first();
   return stats;
 }
 

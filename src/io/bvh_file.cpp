@@ -226,7 +226,7 @@ void write_contents(std::FILE* f, const std::string& name, const Bvh& bvh, const
       encode_header(order.empty() ? kInvalidNode : 0, order.size(), refs.size(), slots, info);
   w.bytes(header.data(), header.size());
 
-  // Nodes as Bvh::compact() would renumber them: depth-first, leaf slots in leaf order.
+  // Nodes as Bvh::renumber_depth_first() would renumber them: depth-first, leaf slots in leaf order.
   uint32_t next_slot = 0;
   for (uint32_t n : order) {
     const BvhNode& nd = bvh[n];

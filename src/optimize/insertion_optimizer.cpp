@@ -370,7 +370,7 @@ OptimizeReport optimize_insertion(Bvh& bvh, const InsertionConfig& config, const
   // Numbering every reachable node densely lets a pass scan the node array for inner
   // nodes; the refit makes every box exactly the union of its children, which undoing a
   // parallel move relies on.
-  bvh.compact();
+  bvh.renumber_depth_first();
   for (uint32_t n : bvh.post_order()) {
     BvhNode& nd = bvh[n];
     if (!nd.is_leaf()) nd.set_box(merge(bvh[nd.left()].box, bvh[nd.right()].box));
@@ -470,7 +470,7 @@ OptimizeReport optimize_insertion(Bvh& bvh, const InsertionConfig& config, const
     }
     if (converged) report.stop_reason = "converged";
   }
-  bvh.compact();
+  bvh.renumber_depth_first();
   report.seconds = elapsed();
   return report;
 }

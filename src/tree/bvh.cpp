@@ -58,7 +58,7 @@ std::vector<uint32_t> Bvh::post_order() const {
   return {order.rbegin(), order.rend()};
 }
 
-void Bvh::compact() {
+void Bvh::renumber_depth_first() {
   if (empty()) {
     nodes.clear();
     return;

@@ -1,4 +1,4 @@
-#include "bvhopt/compaction.h"
+#include "bvhopt/collapse_leaves.h"
 
 #include <algorithm>
 #include <vector>
@@ -7,8 +7,8 @@
 
 namespace bvhopt {
 
-CompactionResult compact_leaves(Bvh& bvh, const CompactionConfig& config) {
-  CompactionResult result;
+CollapseResult collapse_leaves(Bvh& bvh, const CollapseConfig& config) {
+  CollapseResult result;
   if (bvh.empty()) return result;
   const CostModel& m = config.cost;
   result.cost_before = sah_cost(bvh, m);
@@ -73,7 +73,7 @@ CompactionResult compact_leaves(Bvh& bvh, const CompactionConfig& config) {
     stack.push_back(nd.left());
   }
   bvh.ref_indices = std::move(new_refs);
-  bvh.compact();
+  bvh.renumber_depth_first();
 
   for (const BvhNode& nd : bvh.nodes) result.leaves_after += nd.is_leaf();
   result.nodes_after = bvh.nodes.size();

@@ -9,14 +9,14 @@
 
 namespace bvhopt {
 
-struct CompactionConfig {
+struct CollapseConfig {
   CostModel cost;  // c_T and c_I decide where a leaf beats a subtree
   // A subtree holding more references than this is never collapsed; 0 (the default) = no
   // limit, the paper's `ocost`. Tracers with a fixed leaf capacity set it (e.g. 8).
   uint32_t max_leaf_size = 0;
 };
 
-struct CompactionResult {
+struct CollapseResult {
   double cost_before = 0.0;   // sah_cost before
   double cost_after = 0.0;    // sah_cost after; equals optimal_collapse_cost(before)
   uint64_t leaves_before = 0;
@@ -28,7 +28,7 @@ struct CompactionResult {
 // Bottom-up, a subtree becomes one leaf wherever c_I * SA(N) * t(N) is no more than its
 // cost as a tree (after the collapses below it). The new leaf's references are its old
 // leaves' references in depth-first order, so every leaf's slots stay contiguous; then
-// bvh.compact() renumbers the nodes depth-first. Never raises the cost.
-CompactionResult compact_leaves(Bvh& bvh, const CompactionConfig& config = {});
+// bvh.renumber_depth_first() renumbers the nodes depth-first. Never raises the cost.
+CollapseResult collapse_leaves(Bvh& bvh, const CollapseConfig& config = {});
 
 }  // namespace bvhopt

@@ -83,7 +83,7 @@ void build_top_down(Bvh& bvh, const PrimitiveRefs& refs, const SplitFn& split, u
   // Boxes were set top-down from the references; inner boxes are already exact unions.
   // The numbering is already depth-first; only leaves of several references leave
   // unused nodes behind that compacting removes.
-  if (2 * leaves.load() - 1 != bvh.nodes.size()) bvh.compact();
+  if (2 * leaves.load() - 1 != bvh.nodes.size()) bvh.renumber_depth_first();
 }
 
 }  // namespace bvhopt::detail

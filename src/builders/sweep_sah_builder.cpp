@@ -9,7 +9,7 @@
 #include <bit>
 #include <memory>
 
-#include "build/sah_common.h"
+#include "builders/sah_common.h"
 
 namespace bvhopt {
 namespace {
@@ -50,7 +50,7 @@ class SweepBuilder {
     is_left_.reset();
     scratch_.reset();
     // With leaves of several references some preallocated nodes stay unused.
-    if (2 * leaves_.load() - 1 != bvh_.nodes.size()) bvh_.compact();
+    if (2 * leaves_.load() - 1 != bvh_.nodes.size()) bvh_.renumber_depth_first();
   }
 
  private:

@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-#include "build/top_down.h"
+#include "builders/top_down.h"
 
 namespace bvhopt {
 namespace {

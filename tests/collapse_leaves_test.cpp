@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "bvhopt/compaction.h"
+#include "bvhopt/collapse_leaves.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/insertion_optimizer.h"
 #include "bvhopt/median_builder.h"
@@ -16,7 +16,7 @@ namespace {
 TEST(Compaction, TwoTouchingCubesBecomeOneLeaf) {
   PrimitiveRefs refs = make_references({Box({0, 0, 0}, {1, 1, 1}), Box({1, 0, 0}, {2, 1, 1})});
   Bvh bvh = build_object_median(refs);
-  CompactionResult r = compact_leaves(bvh);
+  CollapseResult r = collapse_leaves(bvh);
   EXPECT_NEAR(r.cost_before, 5.4, 1e-9);
   EXPECT_NEAR(r.cost_after, 4.0, 1e-9);  // 2 * 10 * 2 / 10
   ASSERT_EQ(bvh.nodes.size(), 1u);
@@ -28,9 +28,9 @@ TEST(Compaction, LeafSizeOneChangesNothing) {
   PrimitiveRefs refs = testing::random_refs(300, 1);
   Bvh bvh = build_sweep_sah(refs);
   std::string before = testing::tree_signature(bvh, refs);
-  CompactionConfig cfg;
+  CollapseConfig cfg;
   cfg.max_leaf_size = 1;
-  CompactionResult r = compact_leaves(bvh, cfg);
+  CollapseResult r = collapse_leaves(bvh, cfg);
   EXPECT_EQ(r.cost_before, r.cost_after);
   EXPECT_EQ(testing::tree_signature(bvh, refs), before);
 }
@@ -54,9 +54,9 @@ TEST(Compaction, EqualsOcostAndNeverRaisesTheCost) {
       Bvh t = bvh;
       const double ocost = optimal_collapse_cost(t, CostModel{}, max_leaf);
       const double before = sah_cost(t);
-      CompactionConfig cfg;
+      CollapseConfig cfg;
       cfg.max_leaf_size = max_leaf;
-      CompactionResult r = compact_leaves(t, cfg);
+      CollapseResult r = collapse_leaves(t, cfg);
       ValidationReport v = validate(t, refs);
       ASSERT_TRUE(v.ok()) << v.summary();
       EXPECT_EQ(r.cost_before, before);
@@ -72,7 +72,7 @@ TEST(Compaction, EqualsOcostAndNeverRaisesTheCost) {
       }
       // Compacting twice changes nothing: the first pass already took every collapse.
       Bvh again = t;
-      CompactionResult r2 = compact_leaves(again, cfg);
+      CollapseResult r2 = collapse_leaves(again, cfg);
       EXPECT_EQ(r2.leaves_after, r.leaves_after);
       collapsed += r.leaves_after < r.leaves_before;
     }
@@ -83,7 +83,7 @@ TEST(Compaction, EqualsOcostAndNeverRaisesTheCost) {
 TEST(Compaction, LeavesAreContiguousInDepthFirstOrder) {
   PrimitiveRefs refs = testing::random_refs(500, 5);
   Bvh bvh = build_spatial_median(refs);
-  compact_leaves(bvh);
+  collapse_leaves(bvh);
   uint32_t next = 0;
   for (uint32_t n : bvh.depth_first_order()) {
     if (!bvh[n].is_leaf()) continue;

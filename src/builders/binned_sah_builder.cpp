@@ -12,7 +12,7 @@
 #include <memory>
 #include <vector>
 
-#include "build/sah_common.h"
+#include "builders/sah_common.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -222,7 +222,7 @@ class BinnedBuilder {
         });
     build(detail::NodeRange{0, n_, 0}, kInvalidNode, root.box, root.cb);
     tasks_.wait();
-    if (2 * leaves_.load() - 1 != bvh_.nodes.size()) bvh_.compact();
+    if (2 * leaves_.load() - 1 != bvh_.nodes.size()) bvh_.renumber_depth_first();
   }
 
  private:

@@ -9,7 +9,7 @@
 #include <cstdint>
 #include <string>
 
-#include "build/top_down.h"
+#include "builders/top_down.h"
 #include "bvhopt/box.h"
 #include "bvhopt/error.h"
 #include "bvhopt/references.h"
