@@ -41,7 +41,7 @@
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/references.h"
 #include "bvhopt/scene.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
 
 namespace bvhopt {
 namespace {

@@ -51,7 +51,7 @@
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/references.h"
 #include "bvhopt/scene.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
 
 namespace bvhopt {

@@ -16,7 +16,7 @@
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/scene.h"
 #include "bvhopt/stats.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
 #include "cli_common.h"
 #include "commands.h"

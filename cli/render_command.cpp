@@ -6,26 +6,90 @@
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
 #include "cli_common.h"
+#include "commands.h"
 #include "trace_common.h"
 
 namespace bvhopt::cli {
 
-void register_render_command(CLI::App& app);
+namespace {
+
+// Everything `bvhopt render` takes; the defaults are the command's.
+struct RenderOptions {
+  std::string bvh_file;
+  SceneOption scene;
+  ThreadsOption threads;
+  std::string heatmap, shaded, compare, compare_heatmap;
+  uint32_t width = 1024, height = 768;
+  float max_steps = 100.0f;
+  float range = 50.0f;
+  std::string order = "axis";
+  bool json = false;
+  CameraOptions camera;
+};
+
+// Renders the heat map (and the shaded image, and the difference to --compare when given)
+// of primary rays from the camera, and prints a summary.
+void run_render(const RenderOptions& opt) {
+  auto threads = opt.threads.apply();
+  ProgressLine progress;
+  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress);
+  const Mesh& mesh = loaded.mesh;
+  const LoadedTree& tree = loaded.tree;
+  progress.finish();
+  const ChildOrder order = parse_child_order(opt.order);
+  const Camera cam = opt.camera.resolve(mesh, *tree.tracer, opt.width, opt.height);
+  const std::vector<Ray> rays = camera_rays(cam);
+
+  std::vector<Hit> hits;
+  std::vector<TraceCounters> counters;
+  trace_rays(*tree.tracer, rays, RayQuery::closest, hits, &counters, order);
+  write_png(opt.heatmap, heatmap_image(counters, cam.width, cam.height, opt.max_steps));
+  if (!opt.shaded.empty()) write_png(opt.shaded, shaded_image(mesh, rays, hits, cam.width, cam.height));
+
+  double mean_a = 0, mean_b = 0;
+  for (const TraceCounters& c : counters) mean_a += c.steps;
+  mean_a /= double(counters.size());
+  std::string diff_path;
+  if (!opt.compare.empty()) {
+    const LoadedTree other = load_tree_for_scene(opt.compare, mesh);
+    std::vector<Hit> hits_b;
+    std::vector<TraceCounters> counters_b;
+    trace_rays(*other.tracer, rays, RayQuery::closest, hits_b, &counters_b, order);
+    for (const TraceCounters& c : counters_b) mean_b += c.steps;
+    mean_b /= double(counters_b.size());
+    diff_path = opt.compare_heatmap;
+    if (diff_path.empty()) {
+      const std::filesystem::path p(opt.heatmap);
+      diff_path = (p.parent_path() / (p.stem().string() + "-diff" + p.extension().string())).string();
+    }
+    write_png(diff_path, difference_image(counters, counters_b, cam.width, cam.height, opt.range));
+  }
+  if (opt.json) {
+    nlohmann::json j = {{"bvh", opt.bvh_file}, {"scene", mesh.name}, {"width", cam.width},
+                        {"height", cam.height}, {"heatmap", opt.heatmap}, {"mean_steps", mean_a}};
+    if (!opt.shaded.empty()) j["shaded"] = opt.shaded;
+    if (!opt.compare.empty()) {
+      j["compare"] = opt.compare;
+      j["compare_mean_steps"] = mean_b;
+      j["difference_heatmap"] = diff_path;
+    }
+    print_json(j);
+    return;
+  }
+  std::cout << "image      " << cam.width << "x" << cam.height << ", camera at (" << cam.position.x << ", "
+            << cam.position.y << ", " << cam.position.z << ")\n"
+            << "heat map   " << opt.heatmap << " (mean " << format_double(mean_a, 1) << " steps/pixel, scale 0.."
+            << opt.max_steps << ")\n";
+  if (!opt.shaded.empty()) std::cout << "shaded     " << opt.shaded << "\n";
+  if (!opt.compare.empty())
+    std::cout << "compare    " << opt.compare << ": mean " << format_double(mean_b, 1) << " steps/pixel; difference "
+              << diff_path << " (red: more steps than " << opt.bvh_file << ")\n";
+}
+
+}  // namespace
 
 void register_render_command(CLI::App& app) {
-  struct Options {
-    std::string bvh_file;
-    SceneOption scene;
-    ThreadsOption threads;
-    std::string heatmap, shaded, compare, compare_heatmap;
-    uint32_t width = 1024, height = 768;
-    float max_steps = 100.0f;
-    float range = 50.0f;
-    std::string order = "axis";
-    bool json = false;
-    CameraOptions camera;
-  };
-  auto opt = std::make_shared<Options>();
+  auto opt = std::make_shared<RenderOptions>();
   CLI::App* cmd = app.add_subcommand("render", "Heat map of traversal steps per pixel (primary rays), shaded image, "
                                                "and the difference of two trees");
   cmd->add_option("bvh", opt->bvh_file, "BVH file")->required()->type_name("FILE.bvh");
@@ -46,62 +110,7 @@ void register_render_command(CLI::App& app) {
   opt->camera.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print a summary as JSON");
-  cmd->callback([opt] {
-    auto threads = opt->threads.apply();
-    ProgressLine progress;
-    progress.update("loading " + opt->scene.spec + " and " + opt->bvh_file, true);
-    const Mesh mesh = opt->scene.load();
-    const LoadedTree tree = load_tree_for_scene(opt->bvh_file, mesh);
-    progress.finish();
-    const ChildOrder order = opt->order == "distance" ? ChildOrder::distance : ChildOrder::split_axis;
-    const Camera cam = opt->camera.resolve(mesh, *tree.tracer, opt->width, opt->height);
-    const std::vector<Ray> rays = camera_rays(cam);
-
-    std::vector<Hit> hits;
-    std::vector<TraceCounters> counters;
-    trace_rays(*tree.tracer, rays, RayQuery::closest, hits, &counters, order);
-    write_png(opt->heatmap, heatmap_image(counters, cam.width, cam.height, opt->max_steps));
-    if (!opt->shaded.empty()) write_png(opt->shaded, shaded_image(mesh, rays, hits, cam.width, cam.height));
-
-    double mean_a = 0, mean_b = 0;
-    for (const TraceCounters& c : counters) mean_a += c.steps;
-    mean_a /= double(counters.size());
-    std::string diff_path;
-    if (!opt->compare.empty()) {
-      const LoadedTree other = load_tree_for_scene(opt->compare, mesh);
-      std::vector<Hit> hits_b;
-      std::vector<TraceCounters> counters_b;
-      trace_rays(*other.tracer, rays, RayQuery::closest, hits_b, &counters_b, order);
-      for (const TraceCounters& c : counters_b) mean_b += c.steps;
-      mean_b /= double(counters_b.size());
-      diff_path = opt->compare_heatmap;
-      if (diff_path.empty()) {
-        const std::filesystem::path p(opt->heatmap);
-        diff_path = (p.parent_path() / (p.stem().string() + "-diff" + p.extension().string())).string();
-      }
-      write_png(diff_path, difference_image(counters, counters_b, cam.width, cam.height, opt->range));
-    }
-    if (opt->json) {
-      nlohmann::json j = {{"bvh", opt->bvh_file}, {"scene", mesh.name}, {"width", cam.width},
-                          {"height", cam.height}, {"heatmap", opt->heatmap}, {"mean_steps", mean_a}};
-      if (!opt->shaded.empty()) j["shaded"] = opt->shaded;
-      if (!opt->compare.empty()) {
-        j["compare"] = opt->compare;
-        j["compare_mean_steps"] = mean_b;
-        j["difference_heatmap"] = diff_path;
-      }
-      print_json(j);
-      return;
-    }
-    std::cout << "image      " << cam.width << "x" << cam.height << ", camera at (" << cam.position.x << ", "
-              << cam.position.y << ", " << cam.position.z << ")\n"
-              << "heat map   " << opt->heatmap << " (mean " << format_double(mean_a, 1) << " steps/pixel, scale 0.."
-              << opt->max_steps << ")\n";
-    if (!opt->shaded.empty()) std::cout << "shaded     " << opt->shaded << "\n";
-    if (!opt->compare.empty())
-      std::cout << "compare    " << opt->compare << ": mean " << format_double(mean_b, 1) << " steps/pixel; difference "
-                << diff_path << " (red: more steps than " << opt->bvh_file << ")\n";
-  });
+  cmd->callback([opt] { run_render(*opt); });
 }
 
 }  // namespace bvhopt::cli

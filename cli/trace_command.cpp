@@ -7,11 +7,10 @@
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
 #include "cli_common.h"
+#include "commands.h"
 #include "trace_common.h"
 
 namespace bvhopt::cli {
-
-void register_trace_command(CLI::App& app);
 
 namespace {
 
@@ -33,25 +32,143 @@ std::string histogram_line(const CountDistribution& d) {
   return s;
 }
 
+// Everything `bvhopt trace` takes; the defaults are the command's.
+struct TraceOptions {
+  std::string bvh_file;
+  SceneOption scene;
+  ThreadsOption threads;
+  std::string rays = "primary";
+  uint64_t count = 0;
+  uint64_t seed = 1;
+  bool json = false;
+  std::string save_rays, load_rays;
+  std::string order = "axis";
+  uint64_t check = 1000;
+  int repeats = 3;
+  uint32_t width = 1024, height = 768;
+  CameraOptions camera;
+};
+
+// What one run measured, for the report.
+struct TraceResults {
+  RaySet set;
+  RayMeasurement one_thread, all_threads;
+  std::optional<BruteForceCheck> check;
+};
+
+// The rays of a ray file, or a generated set (saved when asked).
+RaySet trace_ray_set(const TraceOptions& opt, const Mesh& mesh, const Tracer& tracer) {
+  RaySet set;
+  if (!opt.load_rays.empty()) {
+    set = read_ray_file(opt.load_rays);
+  } else {
+    RaySetConfig cfg;
+    cfg.kind = *parse_ray_kind(opt.rays);
+    cfg.seed = opt.seed;
+    cfg.count = opt.count;
+    cfg.width = opt.width;
+    cfg.height = opt.height;
+    cfg.up_axis = opt.camera.up_axis();
+    cfg.camera = opt.camera.resolve(mesh, tracer, opt.width, opt.height);
+    set = make_ray_set(mesh, tracer, cfg);
+  }
+  if (!opt.save_rays.empty()) write_ray_file(opt.save_rays, set);
+  if (set.rays.empty()) throw Error("trace: the ray set is empty");
+  return set;
+}
+
+void print_trace_json(const TraceOptions& opt, const Mesh& mesh, const LoadedTree& tree, const TraceResults& r) {
+  const RayMeasurement& m1 = r.one_thread;
+  const RayMeasurement& mn = r.all_threads;
+  nlohmann::json j = {{"bvh", opt.bvh_file},
+                      {"scene", mesh.name},
+                      {"triangles", mesh.triangle_count()},
+                      {"method", tree.info.method},
+                      {"rays", std::string(ray_kind_name(r.set.kind))},
+                      {"query", r.set.query == RayQuery::any ? "any" : "closest"},
+                      {"count", r.set.rays.size()},
+                      {"seed", r.set.seed},
+                      {"order", opt.order},
+                      {"hit_rate", m1.hit_rate},
+                      {"threads_1", {{"seconds", m1.seconds}, {"rays_per_second", m1.rays_per_second}}},
+                      {"threads_n", {{"threads", mn.threads}, {"seconds", mn.seconds},
+                                     {"rays_per_second", mn.rays_per_second}}},
+                      {"steps", distribution_json(m1.steps)},
+                      {"triangle_tests", distribution_json(m1.triangle_tests)}};
+  if (r.check) j["brute_force"] = {{"checked", r.check->checked}, {"mismatches", r.check->mismatches},
+                                   {"first_mismatch", r.check->first_mismatch}};
+  print_json(j);
+}
+
+void print_trace_text(const TraceOptions& opt, const Mesh& mesh, const LoadedTree& tree, const TraceResults& r) {
+  const RayMeasurement& m1 = r.one_thread;
+  const RayMeasurement& mn = r.all_threads;
+  std::cout << "tree       " << opt.bvh_file << " (" << tree.info.method << ")\n"
+            << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles)\n"
+            << "rays       " << r.set.rays.size() << " " << ray_kind_name(r.set.kind)
+            << (r.set.query == RayQuery::any ? " (any hit)" : " (closest hit)") << ", seed " << r.set.seed << "\n"
+            << "hit rate   " << format_double(100.0 * m1.hit_rate, 2) << " %\n"
+            << "speed      " << format_double(m1.rays_per_second / 1e6, 3) << " Mrays/s on 1 thread, "
+            << format_double(mn.rays_per_second / 1e6, 3) << " on " << mn.threads << " (x"
+            << format_double(mn.rays_per_second / m1.rays_per_second, 2) << "), order " << opt.order << "\n"
+            << "steps/ray  mean " << format_double(m1.steps.mean, 2) << ", p50 " << m1.steps.p50 << ", p90 "
+            << m1.steps.p90 << ", p99 " << m1.steps.p99 << ", max " << m1.steps.max << "\n"
+            << "           " << histogram_line(m1.steps) << "\n"
+            << "tests/ray  mean " << format_double(m1.triangle_tests.mean, 2) << ", p50 "
+            << m1.triangle_tests.p50 << ", p90 " << m1.triangle_tests.p90 << ", p99 " << m1.triangle_tests.p99
+            << ", max " << m1.triangle_tests.max << "\n";
+  if (r.check)
+    std::cout << "check      " << r.check->checked << " rays against brute force: "
+              << (r.check->mismatches == 0 ? std::string("all agree")
+                                           : std::to_string(r.check->mismatches) + " differ; " + r.check->first_mismatch)
+              << "\n";
+}
+
+// Loads the tree and the rays, times them on one thread and on all, checks a sample against
+// brute force, and reports; throws Error when traversal and brute force disagree.
+void run_trace(const TraceOptions& opt) {
+  auto threads = opt.threads.apply();
+  ProgressLine progress;
+  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress);
+  const Mesh& mesh = loaded.mesh;
+  const LoadedTree& tree = loaded.tree;
+  const ChildOrder order = parse_child_order(opt.order);
+
+  progress.update("making " + opt.rays + " rays", true);
+  TraceResults r;
+  r.set = trace_ray_set(opt, mesh, *tree.tracer);
+  const RaySet& set = r.set;
+
+  progress.update("tracing " + std::to_string(set.rays.size()) + " rays on 1 thread", true);
+  MeasureOptions one;
+  one.order = order;
+  one.threads = 1;
+  one.repeats = opt.repeats;
+  r.one_thread = measure_rays(*tree.tracer, set.rays, set.query, one);
+  MeasureOptions all = one;
+  all.threads = opt.threads.effective();
+  progress.update("tracing " + std::to_string(set.rays.size()) + " rays on " + std::to_string(all.threads) + " threads",
+                  true);
+  r.all_threads = measure_rays(*tree.tracer, set.rays, set.query, all);
+  if (opt.check > 0) {
+    progress.update("checking " + std::to_string(opt.check) + " rays against brute force", true);
+    r.check = check_against_brute_force(*tree.tracer, mesh, set.rays, set.query, opt.check, opt.seed, order);
+  }
+  progress.finish();
+
+  if (opt.json)
+    print_trace_json(opt, mesh, tree, r);
+  else
+    print_trace_text(opt, mesh, tree, r);
+  if (r.check && r.check->mismatches != 0)
+    throw Error(opt.bvh_file + ": traversal disagrees with brute force on " + std::to_string(r.check->mismatches) +
+                " of " + std::to_string(r.check->checked) + " rays (" + r.check->first_mismatch + ")");
+}
+
 }  // namespace
 
 void register_trace_command(CLI::App& app) {
-  struct Options {
-    std::string bvh_file;
-    SceneOption scene;
-    ThreadsOption threads;
-    std::string rays = "primary";
-    uint64_t count = 0;
-    uint64_t seed = 1;
-    bool json = false;
-    std::string save_rays, load_rays;
-    std::string order = "axis";
-    uint64_t check = 1000;
-    int repeats = 3;
-    uint32_t width = 1024, height = 768;
-    CameraOptions camera;
-  };
-  auto opt = std::make_shared<Options>();
+  auto opt = std::make_shared<TraceOptions>();
   CLI::App* cmd = app.add_subcommand("trace", "Trace a ray set through a BVH file: rays per second, steps, hit rate");
   cmd->add_option("bvh", opt->bvh_file, "BVH file (from bvhopt build or optimize)")->required()->type_name("FILE.bvh");
   opt->scene.add_to(cmd, "--scene", true);
@@ -73,94 +190,7 @@ void register_trace_command(CLI::App& app) {
   opt->camera.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print the results as JSON");
-  cmd->callback([opt] {
-    auto threads = opt->threads.apply();
-    ProgressLine progress;
-    progress.update("loading " + opt->scene.spec + " and " + opt->bvh_file, true);
-    const Mesh mesh = opt->scene.load();
-    const LoadedTree tree = load_tree_for_scene(opt->bvh_file, mesh);
-    const ChildOrder order = opt->order == "distance" ? ChildOrder::distance : ChildOrder::split_axis;
-
-    progress.update("making " + opt->rays + " rays", true);
-    RaySet set;
-    if (!opt->load_rays.empty()) {
-      set = read_ray_file(opt->load_rays);
-    } else {
-      RaySetConfig cfg;
-      cfg.kind = *parse_ray_kind(opt->rays);
-      cfg.seed = opt->seed;
-      cfg.count = opt->count;
-      cfg.width = opt->width;
-      cfg.height = opt->height;
-      cfg.up_axis = opt->camera.up_axis();
-      cfg.camera = opt->camera.resolve(mesh, *tree.tracer, opt->width, opt->height);
-      set = make_ray_set(mesh, *tree.tracer, cfg);
-    }
-    if (!opt->save_rays.empty()) write_ray_file(opt->save_rays, set);
-    if (set.rays.empty()) throw Error("trace: the ray set is empty");
-
-    progress.update("tracing " + std::to_string(set.rays.size()) + " rays on 1 thread", true);
-    MeasureOptions one;
-    one.order = order;
-    one.threads = 1;
-    one.repeats = opt->repeats;
-    const RayMeasurement m1 = measure_rays(*tree.tracer, set.rays, set.query, one);
-    MeasureOptions all = one;
-    all.threads = opt->threads.effective();
-    progress.update("tracing " + std::to_string(set.rays.size()) + " rays on " + std::to_string(all.threads) + " threads",
-                    true);
-    const RayMeasurement mn = measure_rays(*tree.tracer, set.rays, set.query, all);
-    std::optional<BruteForceCheck> check;
-    if (opt->check > 0) {
-      progress.update("checking " + std::to_string(opt->check) + " rays against brute force", true);
-      check = check_against_brute_force(*tree.tracer, mesh, set.rays, set.query, opt->check, opt->seed, order);
-    }
-    progress.finish();
-
-    if (opt->json) {
-      nlohmann::json j = {{"bvh", opt->bvh_file},
-                          {"scene", mesh.name},
-                          {"triangles", mesh.triangle_count()},
-                          {"method", tree.info.method},
-                          {"rays", std::string(ray_kind_name(set.kind))},
-                          {"query", set.query == RayQuery::any ? "any" : "closest"},
-                          {"count", set.rays.size()},
-                          {"seed", set.seed},
-                          {"order", opt->order},
-                          {"hit_rate", m1.hit_rate},
-                          {"threads_1", {{"seconds", m1.seconds}, {"rays_per_second", m1.rays_per_second}}},
-                          {"threads_n", {{"threads", mn.threads}, {"seconds", mn.seconds},
-                                         {"rays_per_second", mn.rays_per_second}}},
-                          {"steps", distribution_json(m1.steps)},
-                          {"triangle_tests", distribution_json(m1.triangle_tests)}};
-      if (check) j["brute_force"] = {{"checked", check->checked}, {"mismatches", check->mismatches},
-                                     {"first_mismatch", check->first_mismatch}};
-      print_json(j);
-    } else {
-      std::cout << "tree       " << opt->bvh_file << " (" << tree.info.method << ")\n"
-                << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles)\n"
-                << "rays       " << set.rays.size() << " " << ray_kind_name(set.kind)
-                << (set.query == RayQuery::any ? " (any hit)" : " (closest hit)") << ", seed " << set.seed << "\n"
-                << "hit rate   " << format_double(100.0 * m1.hit_rate, 2) << " %\n"
-                << "speed      " << format_double(m1.rays_per_second / 1e6, 3) << " Mrays/s on 1 thread, "
-                << format_double(mn.rays_per_second / 1e6, 3) << " on " << mn.threads << " (x"
-                << format_double(mn.rays_per_second / m1.rays_per_second, 2) << "), order " << opt->order << "\n"
-                << "steps/ray  mean " << format_double(m1.steps.mean, 2) << ", p50 " << m1.steps.p50 << ", p90 "
-                << m1.steps.p90 << ", p99 " << m1.steps.p99 << ", max " << m1.steps.max << "\n"
-                << "           " << histogram_line(m1.steps) << "\n"
-                << "tests/ray  mean " << format_double(m1.triangle_tests.mean, 2) << ", p50 "
-                << m1.triangle_tests.p50 << ", p90 " << m1.triangle_tests.p90 << ", p99 " << m1.triangle_tests.p99
-                << ", max " << m1.triangle_tests.max << "\n";
-      if (check)
-        std::cout << "check      " << check->checked << " rays against brute force: "
-                  << (check->mismatches == 0 ? std::string("all agree")
-                                             : std::to_string(check->mismatches) + " differ; " + check->first_mismatch)
-                  << "\n";
-    }
-    if (check && check->mismatches != 0)
-      throw Error(opt->bvh_file + ": traversal disagrees with brute force on " + std::to_string(check->mismatches) +
-                  " of " + std::to_string(check->checked) + " rays (" + check->first_mismatch + ")");
-  });
+  cmd->callback([opt] { run_trace(*opt); });
 }
 
 }  // namespace bvhopt::cli

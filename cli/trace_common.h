@@ -14,7 +14,8 @@
 #include "bvhopt/finalize.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/ray_sets.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
+#include "cli_common.h"
 
 namespace bvhopt::cli {
 
@@ -36,6 +37,25 @@ inline LoadedTree load_tree_for_scene(const std::string& file, const Mesh& mesh)
   t.info = f.info;
   t.tracer = std::make_unique<Tracer>(finalize(f.bvh, f.refs), mesh);
   return t;
+}
+
+// A scene and the BVH file built over it, loaded behind a progress line.
+struct SceneAndTree {
+  Mesh mesh;
+  LoadedTree tree;
+};
+inline SceneAndTree load_scene_and_tree(const SceneOption& scene, const std::string& bvh_file,
+                                        ProgressLine& progress) {
+  progress.update("loading " + scene.spec + " and " + bvh_file, true);
+  SceneAndTree out;
+  out.mesh = scene.load();
+  out.tree = load_tree_for_scene(bvh_file, out.mesh);
+  return out;
+}
+
+// The value of --order.
+inline ChildOrder parse_child_order(const std::string& order) {
+  return order == "distance" ? ChildOrder::distance : ChildOrder::split_axis;
 }
 
 // --camera-position, --camera-target, --up-axis, --fov: the default camera (see

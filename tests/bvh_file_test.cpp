@@ -12,6 +12,7 @@
 #include "bvhopt/bvh_file.h"
 #include "bvhopt/error.h"
 #include "bvhopt/scene.h"
+#include "bvhopt/testing/bvh_file_checksum.h"
 #include "bvhopt/validate.h"
 #include "test_support.h"
 

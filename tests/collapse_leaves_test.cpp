@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "bvhopt/collapse_leaves.h"
 #include "bvhopt/cost.h"
@@ -78,6 +80,80 @@ TEST(Compaction, EqualsOcostAndNeverRaisesTheCost) {
     }
   }
   EXPECT_GT(collapsed, 100);
+}
+
+// The tree with every node of `cut` (a bit set over node ids) that has no cut ancestor made
+// a leaf of all the references below it, collapsed by hand; false when a new leaf would
+// hold more than max_leaf references (0 = no limit).
+bool collapse_by_hand(Bvh& bvh, uint64_t cut, uint32_t max_leaf) {
+  std::vector<uint32_t> refs;
+  bool fits = true;
+  auto gather = [&](auto&& self, uint32_t n, std::vector<uint32_t>& out) -> void {
+    const BvhNode& nd = bvh[n];
+    if (nd.is_leaf()) {
+      for (uint32_t k = 0; k < nd.ref_count(); ++k) out.push_back(bvh.ref_indices[nd.first_ref() + k]);
+      return;
+    }
+    self(self, nd.left(), out);
+    self(self, nd.right(), out);
+  };
+  auto walk = [&](auto&& self, uint32_t n) -> void {
+    BvhNode& nd = bvh[n];
+    if (nd.is_leaf() || (cut >> n & 1)) {
+      const uint32_t first = static_cast<uint32_t>(refs.size());
+      gather(gather, n, refs);
+      const uint32_t count = static_cast<uint32_t>(refs.size()) - first;
+      if (!nd.is_leaf() && max_leaf != 0 && count > max_leaf) fits = false;
+      nd.make_leaf(first, count);
+      return;
+    }
+    self(self, nd.left());
+    self(self, nd.right());
+  };
+  walk(walk, bvh.root);
+  bvh.ref_indices = std::move(refs);
+  return fits;
+}
+
+// ocost, and the cost after collapse_leaves, against the cheapest of every possible collapse
+// of small trees (all subsets of inner nodes, each tree collapsed by hand and costed from
+// scratch): the two share one recurrence, so a fault in it would show in both at once.
+TEST(Compaction, OcostIsTheCheapestOfEveryCollapseChoice) {
+  int cases = 0, collapsed = 0;
+  for (uint32_t seed = 0; seed < 60; ++seed) {
+    const uint32_t count = 1 + seed % 8;
+    const PrimitiveRefs refs = testing::random_refs(count, 100 + seed);
+    const Bvh bvh = seed % 2 == 0 ? build_spatial_median(refs) : build_sweep_sah(refs);
+    ASSERT_LE(bvh.nodes.size(), 63u);
+    for (const CostModel model : {CostModel{}, CostModel{1.0, 1.0}, CostModel{0.5, 4.0}, CostModel{10.0, 1.0}}) {
+      for (uint32_t max_leaf : {0u, 2u, 3u}) {
+        std::vector<uint32_t> inner;
+        for (uint32_t n : bvh.post_order())
+          if (!bvh[n].is_leaf()) inner.push_back(n);
+        double cheapest = sah_cost(bvh, model);
+        for (uint64_t subset = 1; subset < (uint64_t(1) << inner.size()); ++subset) {
+          uint64_t cut = 0;
+          for (size_t i = 0; i < inner.size(); ++i)
+            if (subset >> i & 1) cut |= uint64_t(1) << inner[i];
+          Bvh t = bvh;
+          if (collapse_by_hand(t, cut, max_leaf)) cheapest = std::min(cheapest, sah_cost(t, model));
+        }
+        const double ocost = optimal_collapse_cost(bvh, model, max_leaf);
+        EXPECT_NEAR(ocost, cheapest, 1e-12 * cheapest) << "seed " << seed << " max leaf " << max_leaf;
+        Bvh t = bvh;
+        CollapseConfig cfg;
+        cfg.cost = model;
+        cfg.max_leaf_size = max_leaf;
+        const CollapseResult r = collapse_leaves(t, cfg);
+        EXPECT_EQ(r.cost_after, ocost) << "seed " << seed << " max leaf " << max_leaf;
+        EXPECT_EQ(sah_cost(t, model), ocost);
+        ++cases;
+        collapsed += r.leaves_after < r.leaves_before;
+      }
+    }
+  }
+  EXPECT_EQ(cases, 720);
+  EXPECT_GT(collapsed, 100);  // the cheapest choice is often a real collapse
 }
 
 TEST(Compaction, LeavesAreContiguousInDepthFirstOrder) {

@@ -21,7 +21,8 @@
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/scene.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
+#include "bvhopt/testing/flatten_for_tracing.h"
 #include "bvhopt/validate.h"
 #include "test_support.h"
 

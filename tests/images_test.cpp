@@ -11,6 +11,7 @@
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/references.h"
+#include "bvhopt/testing/flatten_for_tracing.h"
 #include "test_support.h"
 
 namespace bvhopt {

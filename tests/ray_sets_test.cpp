@@ -15,7 +15,8 @@
 #include "bvhopt/references.h"
 #include "bvhopt/scene.h"
 #include "bvhopt/finalize.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
+#include "bvhopt/testing/flatten_for_tracing.h"
 #include "test_support.h"
 
 namespace bvhopt {

@@ -16,7 +16,9 @@
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/references.h"
 #include "bvhopt/scene.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
+#include "bvhopt/testing/brute_force.h"
+#include "bvhopt/testing/flatten_for_tracing.h"
 #include "test_support.h"
 
 namespace bvhopt {

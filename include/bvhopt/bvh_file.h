@@ -37,8 +37,6 @@ void write_bvh_file(const std::filesystem::path& path, const Bvh& bvh, const Pri
 // truncated, checksum mismatch, counts or indices out of range, invalid tree.
 BvhFile read_bvh_file(const std::filesystem::path& path);
 
-// The file's 64-bit checksum (docs/file-format.md) over `size` bytes, for tools and tests
-// that patch a file and need to re-seal it.
-uint64_t bvh_file_checksum(const void* data, uint64_t size);
+// bvh_file_checksum (for tools that patch a file) is in bvhopt/testing/bvh_file_checksum.h.
 
 }  // namespace bvhopt

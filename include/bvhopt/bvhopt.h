@@ -1,5 +1,5 @@
 // Everything public, in pipeline order:
-// scene -> primitive references (optionally subdivided) -> build -> optimize -> finalize -> trace / measure / save.
+// scene -> primitive references (optionally subdivided) -> build -> optimize -> finalize -> layout -> trace / measure / save.
 #pragma once
 
 #include "bvhopt/error.h"
@@ -31,6 +31,8 @@
 
 #include "bvhopt/ray.h"
 #include "bvhopt/ray_sets.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/ray_triangle.h"
+#include "bvhopt/binary_layout.h"
+#include "bvhopt/tracer.h"
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/images.h"

@@ -21,6 +21,17 @@ std::vector<double> subtree_costs(const Bvh& bvh, const CostModel& model = {});
 // The tree's SAH cost: C(root) / SA(root). 0 for an empty tree.
 double sah_cost(const Bvh& bvh, const CostModel& model = {});
 
+// The one recurrence behind optimal_collapse_cost and collapse_leaves: bottom-up, per node,
+// `best` is the subtree's cost (not normalized) after the best collapse at and below it, and
+// `collapse` says whether the node itself becomes a leaf: c_I * SA(N) * t(N) is no more than
+// c_T * SA(N) + best(L) + best(R) and the subtree holds at most max_leaf_size references
+// (0 = no limit). Indexed by node; unreachable nodes get 0; leaves never "collapse".
+struct CollapseCosts {
+  std::vector<double> best;
+  std::vector<uint8_t> collapse;
+};
+CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size);
+
 // The cost after the best collapse of subtrees into leaves (Bittner's `ocost`), without
 // changing the tree: bottom-up, a subtree becomes a leaf wherever c_I * SA(N) * t(N) is no
 // more than its cost as a tree. A subtree holding more than max_leaf_size references is

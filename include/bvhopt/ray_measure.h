@@ -8,7 +8,7 @@
 
 #include "bvhopt/mesh.h"
 #include "bvhopt/ray.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
 
 namespace bvhopt {
 

@@ -24,7 +24,7 @@
 #include "bvhopt/references.h"
 #include "bvhopt/scene.h"
 #include "bvhopt/stats.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
 #include "experiment/experiment_internal.h"
 

@@ -79,29 +79,18 @@ int centre_axis(const Box& a, const Box& b) {
   throw Error("finalize: node " + std::to_string(node) + ": " + what);
 }
 
-}  // namespace
+// In a child decision: the right child goes first (bits 0-1 are the axis).
+constexpr uint8_t kSwap = 4;
 
-FlatBvh finalize(const Bvh& bvh, const PrimitiveRefs& refs, const FinalizeOptions& options) {
-  FlatBvh flat;
-  if (bvh.empty()) return flat;
-  if (bvh.root >= bvh.nodes.size())
-    throw Error("finalize: root " + std::to_string(bvh.root) + " out of range (" + std::to_string(bvh.nodes.size()) +
-                " nodes)");
-  flat.nodes.reserve(bvh.nodes.size());
-  flat.triangle_ids.reserve(bvh.ref_indices.size());
-
-
+// Per inner node, the axis and whether to swap the children, in index order:
+// that needs both children's boxes, and the right child lies far from its parent in a
+// depth-first tree, so reading it during the walk (place_nodes) cost a cache miss per node.
+// Here the iterations are independent: the far box is prefetched a few nodes ahead and
+// the range is split across threads. Unreachable nodes may hold garbage; they are
+// skipped if their indices are out of range, and their results are never read.
+std::vector<uint8_t> child_decisions(const Bvh& bvh, bool reorder) {
   const size_t node_count = bvh.nodes.size();
-
-  // First, per inner node, the axis and whether to swap the children, in index order:
-  // that needs both children's boxes, and the right child lies far from its parent in a
-  // depth-first tree, so reading it during the walk below cost a cache miss per node.
-  // Here the iterations are independent: the far box is prefetched a few nodes ahead and
-  // the range is split across threads. Unreachable nodes may hold garbage; they are
-  // skipped if their indices are out of range, and their results are never read.
-  constexpr uint8_t kSwap = 4;
   std::vector<uint8_t> decision(node_count, 0);
-  const bool reorder = options.order_children_by_split_axis;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, node_count, 8192), [&](const tbb::blocked_range<size_t>& range) {
     constexpr size_t kAhead = 16;
     for (size_t n = range.begin(); n < range.end(); ++n) {
@@ -121,7 +110,13 @@ FlatBvh finalize(const Bvh& bvh, const PrimitiveRefs& refs, const FinalizeOption
       }
     }
   });
+  return decision;
+}
 
+// The depth-first walk that places every node; returns, per leaf entry, its slot in
+// bvh.ref_indices. Throws Error on cycles, empty or oversized leaves, and indices out of range.
+std::vector<uint32_t> place_nodes(const Bvh& bvh, const std::vector<uint8_t>& decision, FlatBvh& flat) {
+  const size_t node_count = bvh.nodes.size();
   // The left child is always the next node, so only right children need their flat
   // index patched into the parent once they are placed.
   struct Pending {
@@ -166,7 +161,12 @@ FlatBvh finalize(const Bvh& bvh, const PrimitiveRefs& refs, const FinalizeOption
     stack.push_back({second, idx});
     stack.push_back({first, kInvalidNode});
   }
+  return entry_slot;
+}
 
+// Leaf entries resolved to triangle ids in parallel, after the walk.
+void resolve_triangle_ids(const Bvh& bvh, const PrimitiveRefs& refs, const std::vector<uint32_t>& entry_slot,
+                          FlatBvh& flat) {
   const size_t entries = entry_slot.size();
   const size_t ref_count = refs.triangle_ids.size();
   flat.triangle_ids.resize(entries);
@@ -193,7 +193,23 @@ FlatBvh finalize(const Bvh& bvh, const PrimitiveRefs& refs, const FinalizeOption
       throw Error("finalize: leaf slot " + std::to_string(entry_slot[e]) + " holds reference " +
                   std::to_string(bvh.ref_indices[entry_slot[e]]) + ", out of range (" + std::to_string(ref_count) +
                   " references)");
+}
+
+}  // namespace
+
+FlatBvh finalize(const Bvh& bvh, const PrimitiveRefs& refs, const FinalizeOptions& options) {
+  FlatBvh flat;
+  if (bvh.empty()) return flat;
+  if (bvh.root >= bvh.nodes.size())
+    throw Error("finalize: root " + std::to_string(bvh.root) + " out of range (" + std::to_string(bvh.nodes.size()) +
+                " nodes)");
+  flat.nodes.reserve(bvh.nodes.size());
+  flat.triangle_ids.reserve(bvh.ref_indices.size());
+  const std::vector<uint8_t> decision = child_decisions(bvh, options.order_children_by_split_axis);
+  const std::vector<uint32_t> entry_slot = place_nodes(bvh, decision, flat);
+  resolve_triangle_ids(bvh, refs, entry_slot, flat);
   return flat;
 }
+
 
 }  // namespace bvhopt

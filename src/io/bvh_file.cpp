@@ -14,6 +14,7 @@
 #include "bvhopt/error.h"
 #include "bvhopt/validate.h"
 #include "bvhopt/atomic_file.h"
+#include "bvhopt/testing/bvh_file_checksum.h"
 
 // The layout is described byte for byte in docs/file-format.md; keep the two in step.
 
@@ -306,17 +307,20 @@ void write_bvh_file(const std::filesystem::path& path, const Bvh& bvh, const Pri
   });
 }
 
-BvhFile read_bvh_file(const std::filesystem::path& path) {
-  const std::string name = path.string();
-  FilePtr f(std::fopen(path.c_str(), "rb"));
-  if (!f) throw Error(name + ": cannot open: " + sys_error(errno));
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) throw Error(name + ": not a regular file");
-  const uint64_t file_size = std::filesystem::file_size(path, ec);
-  if (ec) throw Error(name + ": cannot get the file size: " + ec.message());
-  std::setvbuf(f.get(), nullptr, _IONBF, 0);  // reads come in 1 MiB chunks
+namespace {
 
-  Reader in(f.get(), name);
+// The counts and sizes of the header, as read and range-checked.
+struct Header {
+  uint64_t header_size = 0;
+  uint32_t flags = 0;
+  uint32_t root = 0;
+  uint64_t node_count = 0, ref_count = 0, slot_count = 0;
+};
+
+// The fixed header, the scene and method names, and the header bytes this version does not
+// know; fills `info`. Every size is checked against the file's before anything is
+// allocated, so a bogus count costs an error message, not a huge allocation.
+Header read_header(Reader& in, const std::string& name, uint64_t file_size, BvhFileInfo& info) {
   auto truncated = [&](uint64_t expected, const std::string& what) {
     return Error(name + ": truncated: expected " + std::to_string(expected) + " bytes" + what + ", file has " +
                  std::to_string(file_size));
@@ -336,46 +340,45 @@ BvhFile read_bvh_file(const std::filesystem::path& path) {
     throw Error(name + ": written by a newer bvhopt: version " + std::to_string(version) + ", this reads up to " +
                 std::to_string(kBvhFileVersion));
   if (version == 0) throw Error(name + ": corrupt header: version 0 does not exist");
-  const uint64_t header_size = load<uint32_t>(fixed + 12);
-  const uint32_t flags = load<uint32_t>(fixed + 16);
-  const uint32_t root = load<uint32_t>(fixed + 20);
-  const uint64_t node_count = load<uint64_t>(fixed + 24);
-  const uint64_t ref_count = load<uint64_t>(fixed + 32);
-  const uint64_t slot_count = load<uint64_t>(fixed + 40);
-  BvhFile out;
-  out.info.cost.traversal = load<double>(fixed + 48);
-  out.info.cost.intersection = load<double>(fixed + 56);
-  out.info.scene_triangles = load<uint64_t>(fixed + 64);
+  Header h;
+  h.header_size = load<uint32_t>(fixed + 12);
+  h.flags = load<uint32_t>(fixed + 16);
+  h.root = load<uint32_t>(fixed + 20);
+  h.node_count = load<uint64_t>(fixed + 24);
+  h.ref_count = load<uint64_t>(fixed + 32);
+  h.slot_count = load<uint64_t>(fixed + 40);
+  info.cost.traversal = load<double>(fixed + 48);
+  info.cost.intersection = load<double>(fixed + 56);
+  info.scene_triangles = load<uint64_t>(fixed + 64);
   const uint64_t name_len = load<uint32_t>(fixed + 76);
 
-  // Every size is checked against the file's before anything is allocated, so a bogus
-  // count costs an error message, not a huge allocation.
   if (kFixedHeaderSize + name_len + 4 > file_size)
     throw truncated(kFixedHeaderSize + name_len + 4, " at least (header with a scene name of " +
                                                          std::to_string(name_len) + " bytes)");
-  out.info.scene_name.resize(name_len);
-  in.read(reinterpret_cast<unsigned char*>(out.info.scene_name.data()), name_len);
+  info.scene_name.resize(name_len);
+  in.read(reinterpret_cast<unsigned char*>(info.scene_name.data()), name_len);
   unsigned char len4[4];
   in.read(len4, 4);
   const uint64_t method_len = load<uint32_t>(len4);
   const uint64_t strings_end = kFixedHeaderSize + name_len + 4 + method_len;
   if (strings_end > file_size)
     throw truncated(strings_end, " at least (header with a method name of " + std::to_string(method_len) + " bytes)");
-  out.info.method.resize(method_len);
-  in.read(reinterpret_cast<unsigned char*>(out.info.method.data()), method_len);
-  if (header_size < strings_end)
-    throw Error(name + ": corrupt header: header size " + std::to_string(header_size) +
+  info.method.resize(method_len);
+  in.read(reinterpret_cast<unsigned char*>(info.method.data()), method_len);
+  if (h.header_size < strings_end)
+    throw Error(name + ": corrupt header: header size " + std::to_string(h.header_size) +
                 " is smaller than its contents (" + std::to_string(strings_end) + " bytes)");
 
-  if (node_count > kMaxCount || ref_count > kMaxCount || slot_count > kMaxCount)
-    throw Error(name + ": corrupt header: counts out of range (" + std::to_string(node_count) + " nodes, " +
-                std::to_string(slot_count) + " leaf slots, " + std::to_string(ref_count) +
+  if (h.node_count > kMaxCount || h.ref_count > kMaxCount || h.slot_count > kMaxCount)
+    throw Error(name + ": corrupt header: counts out of range (" + std::to_string(h.node_count) + " nodes, " +
+                std::to_string(h.slot_count) + " leaf slots, " + std::to_string(h.ref_count) +
                 " references; at most 4294967295 each)");
   // No overflow: each count is below 2^32 and each record at most 32 bytes.
-  const uint64_t expected =
-      header_size + node_count * kNodeRecord + slot_count * kSlotRecord + ref_count * kRefRecord + kChecksumSize;
-  const std::string counts = " (header: " + std::to_string(node_count) + " nodes, " + std::to_string(slot_count) +
-                             " leaf slots, " + std::to_string(ref_count) + " references)";
+  const uint64_t expected = h.header_size + h.node_count * kNodeRecord + h.slot_count * kSlotRecord +
+                            h.ref_count * kRefRecord + kChecksumSize;
+  const std::string counts = " (header: " + std::to_string(h.node_count) + " nodes, " +
+                             std::to_string(h.slot_count) + " leaf slots, " + std::to_string(h.ref_count) +
+                             " references)";
   if (file_size < expected) throw truncated(expected, counts);
   if (file_size > expected)
     throw Error(name + ": corrupt: expected " + std::to_string(expected) + " bytes" + counts + ", file has " +
@@ -383,19 +386,22 @@ BvhFile read_bvh_file(const std::filesystem::path& path) {
 
   // Header bytes this version does not know (a later minor addition) are skipped.
   std::vector<unsigned char> chunk(kIoChunk);
-  for (uint64_t left = header_size - strings_end; left > 0;) {
+  for (uint64_t left = h.header_size - strings_end; left > 0;) {
     size_t take = static_cast<size_t>(std::min<uint64_t>(left, chunk.size()));
     in.read(chunk.data(), take);
     left -= take;
   }
+  return h;
+}
 
-  // Read everything while hashing, check the checksum, and only then judge the contents,
-  // so a flipped byte is reported as corruption rather than as whatever it broke.
-  Bvh& bvh = out.bvh;
-  bvh.nodes.resize(node_count);
+// The node, slot and reference records, hashed as they are read, then the checksum: a
+// flipped byte is reported as corruption rather than as whatever it broke.
+void read_records(Reader& in, const std::string& name, const Header& h, Bvh& bvh, PrimitiveRefs& refs) {
+  std::vector<unsigned char> chunk(kIoChunk);
+  bvh.nodes.resize(h.node_count);
   constexpr size_t kNodesPerChunk = kIoChunk / kNodeRecord;
-  for (uint64_t i = 0; i < node_count;) {
-    size_t n = static_cast<size_t>(std::min<uint64_t>(node_count - i, kNodesPerChunk));
+  for (uint64_t i = 0; i < h.node_count;) {
+    size_t n = static_cast<size_t>(std::min<uint64_t>(h.node_count - i, kNodesPerChunk));
     in.read(chunk.data(), n * kNodeRecord);
     const unsigned char* p = chunk.data();
     for (size_t k = 0; k < n; ++k, p += kNodeRecord) {
@@ -406,19 +412,18 @@ BvhFile read_bvh_file(const std::filesystem::path& path) {
     }
     i += n;
   }
-  bvh.ref_indices.resize(slot_count);
+  bvh.ref_indices.resize(h.slot_count);
   constexpr size_t kSlotsPerChunk = kIoChunk / kSlotRecord;
-  for (uint64_t i = 0; i < slot_count;) {
-    size_t n = static_cast<size_t>(std::min<uint64_t>(slot_count - i, kSlotsPerChunk));
+  for (uint64_t i = 0; i < h.slot_count;) {
+    size_t n = static_cast<size_t>(std::min<uint64_t>(h.slot_count - i, kSlotsPerChunk));
     in.read(chunk.data(), n * kSlotRecord);
     for (size_t k = 0; k < n; ++k) bvh.ref_indices[i + k] = load<uint32_t>(chunk.data() + k * kSlotRecord);
     i += n;
   }
-  PrimitiveRefs& refs = out.refs;
-  refs.resize(ref_count);
+  refs.resize(h.ref_count);
   constexpr size_t kRefsPerChunk = kIoChunk / kRefRecord;
-  for (uint64_t i = 0; i < ref_count;) {
-    size_t n = static_cast<size_t>(std::min<uint64_t>(ref_count - i, kRefsPerChunk));
+  for (uint64_t i = 0; i < h.ref_count;) {
+    size_t n = static_cast<size_t>(std::min<uint64_t>(h.ref_count - i, kRefsPerChunk));
     in.read(chunk.data(), n * kRefRecord);
     const unsigned char* p = chunk.data();
     for (size_t k = 0; k < n; ++k, p += kRefRecord) {
@@ -432,36 +437,29 @@ BvhFile read_bvh_file(const std::filesystem::path& path) {
   unsigned char tail[8];
   in.read(tail, 8, false);
   if (load<uint64_t>(tail) != computed) throw Error(name + ": corrupt: checksum mismatch");
+}
 
-  if (flags != 0) throw Error(name + ": unsupported flags 0x" + [&] {
-                           char b[16];
-                           std::snprintf(b, sizeof b, "%x", flags);
-                           return std::string(b);
-                         }() + " (version 1 defines none)");
-  if (node_count == 0 ? root != kInvalidNode : root != 0)
-    throw Error(name + ": corrupt: root " + std::to_string(root) + " (nodes are stored depth-first: the root is node 0" +
-                std::string(node_count == 0 ? ", and an empty tree has none)" : ")"));
-  bvh.root = root;
-
-  // Structure: children must follow their parent (depth-first order, hence no cycles)
-  // and stay in range; each node gets at most one parent.
-  for (uint64_t i = 0; i < node_count; ++i) {
+// Children must follow their parent (depth-first order, hence no cycles) and stay in
+// range; each node gets at most one parent, whose link is set here. Leaves hold slots in
+// range.
+void link_parents(const std::string& name, const Header& h, Bvh& bvh) {
+  for (uint64_t i = 0; i < h.node_count; ++i) {
     BvhNode& nd = bvh.nodes[i];
     auto where = [&] { return name + ": node " + std::to_string(i) + ": "; };  // only on failure
     if (nd.is_leaf()) {
       const uint64_t first = nd.first_ref(), count = nd.ref_count();
       if (count == 0) throw Error(where() + "leaf holds no references");
-      if (first + count > slot_count)
+      if (first + count > h.slot_count)
         throw Error(where() + "leaf slots [" + std::to_string(first) + ", " + std::to_string(first + count) +
-                    ") out of range (" + std::to_string(slot_count) + " slots)");
+                    ") out of range (" + std::to_string(h.slot_count) + " slots)");
       continue;
     }
     for (int side = 0; side < 2; ++side) {
       const uint64_t c = nd.child(side);
       const char* which = side == 0 ? "left" : "right";
-      if (c >= node_count)
-        throw Error(where() + which + " child " + std::to_string(c) + " out of range (" + std::to_string(node_count) +
-                    " nodes)");
+      if (c >= h.node_count)
+        throw Error(where() + which + " child " + std::to_string(c) + " out of range (" +
+                    std::to_string(h.node_count) + " nodes)");
       if (c <= i)
         throw Error(where() + which + " child " + std::to_string(c) +
                     " does not follow its parent (nodes must be stored depth-first)");
@@ -472,18 +470,53 @@ BvhFile read_bvh_file(const std::filesystem::path& path) {
       child.parent = static_cast<uint32_t>(i);
     }
   }
-  for (uint64_t s = 0; s < slot_count; ++s)
-    if (bvh.ref_indices[s] >= ref_count)
+}
+
+// After the checksum: flags, root, links, and every index the records hold.
+void check_references(const std::string& name, const Header& h, BvhFile& out) {
+  Bvh& bvh = out.bvh;
+  const PrimitiveRefs& refs = out.refs;
+  if (h.flags != 0) throw Error(name + ": unsupported flags 0x" + [&] {
+                             char b[16];
+                             std::snprintf(b, sizeof b, "%x", h.flags);
+                             return std::string(b);
+                           }() + " (version 1 defines none)");
+  if (h.node_count == 0 ? h.root != kInvalidNode : h.root != 0)
+    throw Error(name + ": corrupt: root " + std::to_string(h.root) +
+                " (nodes are stored depth-first: the root is node 0" +
+                std::string(h.node_count == 0 ? ", and an empty tree has none)" : ")"));
+  bvh.root = h.root;
+  link_parents(name, h, bvh);
+  for (uint64_t s = 0; s < h.slot_count; ++s)
+    if (bvh.ref_indices[s] >= h.ref_count)
       throw Error(name + ": leaf slot " + std::to_string(s) + " holds reference " + std::to_string(bvh.ref_indices[s]) +
-                  ", out of range (" + std::to_string(ref_count) + " references)");
+                  ", out of range (" + std::to_string(h.ref_count) + " references)");
   if (out.info.scene_triangles > 0)
-    for (uint64_t r = 0; r < ref_count; ++r)
+    for (uint64_t r = 0; r < h.ref_count; ++r)
       if (refs.triangle_ids[r] >= out.info.scene_triangles)
         throw Error(name + ": reference " + std::to_string(r) + ": triangle id " +
                     std::to_string(refs.triangle_ids[r]) + " out of range (the scene has " +
                     std::to_string(out.info.scene_triangles) + " triangles)");
+}
 
-  ValidationReport report = validate(bvh, refs, ValidationOptions{.allow_dropped_duplicates = true});
+}  // namespace
+
+BvhFile read_bvh_file(const std::filesystem::path& path) {
+  const std::string name = path.string();
+  FilePtr f(std::fopen(path.c_str(), "rb"));
+  if (!f) throw Error(name + ": cannot open: " + sys_error(errno));
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw Error(name + ": not a regular file");
+  const uint64_t file_size = std::filesystem::file_size(path, ec);
+  if (ec) throw Error(name + ": cannot get the file size: " + ec.message());
+  std::setvbuf(f.get(), nullptr, _IONBF, 0);  // reads come in 1 MiB chunks
+
+  Reader in(f.get(), name);
+  BvhFile out;
+  const Header h = read_header(in, name, file_size, out.info);
+  read_records(in, name, h, out.bvh, out.refs);
+  check_references(name, h, out);
+  ValidationReport report = validate(out.bvh, out.refs, ValidationOptions{.allow_dropped_duplicates = true});
   if (!report.ok()) throw Error(name + ": invalid tree: " + report.summary());
   return out;
 }

@@ -29,26 +29,34 @@ double sah_cost(const Bvh& bvh, const CostModel& model) {
   return cost[bvh.root] / root_area;
 }
 
-double optimal_collapse_cost(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size) {
-  if (bvh.empty()) return 0.0;
-  std::vector<double> best(bvh.nodes.size(), 0.0);
+CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size) {
+  CollapseCosts out;
+  out.best.assign(bvh.nodes.size(), 0.0);
+  out.collapse.assign(bvh.nodes.size(), 0);
+  if (bvh.empty()) return out;
   std::vector<uint64_t> count(bvh.nodes.size(), 0);
   for (uint32_t n : bvh.post_order()) {
     const BvhNode& nd = bvh[n];
     if (nd.is_leaf()) {
       count[n] = nd.ref_count();
-      best[n] = leaf_cost(nd.area, nd.ref_count(), model);
+      out.best[n] = leaf_cost(nd.area, nd.ref_count(), model);
       continue;
     }
     count[n] = count[nd.left()] + count[nd.right()];
-    double as_tree = model.traversal * nd.area + best[nd.left()] + best[nd.right()];
-    bool may_collapse = max_leaf_size == 0 || count[n] <= max_leaf_size;
-    double as_leaf = model.intersection * nd.area * static_cast<double>(count[n]);
-    best[n] = may_collapse ? std::min(as_tree, as_leaf) : as_tree;
+    const double as_tree = model.traversal * nd.area + out.best[nd.left()] + out.best[nd.right()];
+    const bool may_collapse = max_leaf_size == 0 || count[n] <= max_leaf_size;
+    const double as_leaf = model.intersection * nd.area * static_cast<double>(count[n]);
+    out.collapse[n] = may_collapse && as_leaf <= as_tree;
+    out.best[n] = out.collapse[n] ? as_leaf : as_tree;
   }
+  return out;
+}
+
+double optimal_collapse_cost(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size) {
+  if (bvh.empty()) return 0.0;
   double root_area = bvh[bvh.root].area;
   if (!(root_area > 0.0)) return sah_cost(bvh, model);
-  return best[bvh.root] / root_area;
+  return collapse_costs(bvh, model, max_leaf_size).best[bvh.root] / root_area;
 }
 
 }  // namespace bvhopt

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <vector>
 
 namespace bvhopt {
 namespace {
@@ -61,174 +62,221 @@ std::string ValidationReport::summary() const {
   return s;
 }
 
-ValidationReport validate(const Bvh& bvh, const PrimitiveRefs& refs, const ValidationOptions& options) {
-  ValidationReport report;
-  Collector out(report);
-  const size_t node_count = bvh.nodes.size();
-  const size_t slot_count = bvh.ref_indices.size();
-  const size_t ref_count = refs.boxes.size();
+namespace {
 
-  if (refs.centroids.size() != ref_count || refs.triangle_ids.size() != ref_count) {
-    out.add("references: array sizes differ (" + num(ref_count) + " boxes, " + num(refs.centroids.size()) +
-            " centroids, " + num(refs.triangle_ids.size()) + " triangle ids)");
+// One validation's inputs, its problem list, and who owns each slot and each reference
+// (so a duplicate can name both leaves).
+struct Validation {
+  const Bvh& bvh;
+  const PrimitiveRefs& refs;
+  Collector& out;
+  size_t node_count = 0, slot_count = 0, ref_count = 0;
+  std::vector<uint32_t> slot_owner;  // per slot, the leaf node holding it
+  std::vector<uint32_t> ref_slot;    // per reference, the slot holding it
+
+  Validation(const Bvh& b, const PrimitiveRefs& r, Collector& o)
+      : bvh(b), refs(r), out(o), node_count(b.nodes.size()), slot_count(b.ref_indices.size()),
+        ref_count(r.boxes.size()), slot_owner(slot_count, kInvalidNode), ref_slot(ref_count, kInvalidNode) {}
+};
+
+void check_reference_arrays(Validation& v) {
+  if (v.refs.centroids.size() != v.ref_count || v.refs.triangle_ids.size() != v.ref_count) {
+    v.out.add("references: array sizes differ (" + num(v.ref_count) + " boxes, " + num(v.refs.centroids.size()) +
+              " centroids, " + num(v.refs.triangle_ids.size()) + " triangle ids)");
   }
+}
 
-  // Who owns each slot and each reference, so a duplicate can name both leaves.
-  std::vector<uint32_t> slot_owner(slot_count, kInvalidNode);
-  std::vector<uint32_t> ref_slot(ref_count, kInvalidNode);
-  std::vector<uint8_t> reached(node_count, 0);
+// A node on the walk's stack. The walk visits a compacted tree in index order and reads each
+// node once, when it is popped; validating a 10M-triangle tree is bound by memory traffic,
+// not by the checks. So a node's parent link is checked when the node is popped, and the
+// union test of an inner node waits for its right child (far away in depth-first order):
+// the right child's visit carries the parent's box and the left child's box (the left
+// child is the parent's neighbour, cheap to read at once).
+struct Visit {
+  uint32_t node, parent;
+  int side;
+  bool check_union;
+  Box parent_box, sibling_box;
+};
 
-  if (bvh.root == kInvalidNode) {
-    if (ref_count > 0) out.add("tree is empty (no root) but there are " + num(ref_count) + " references");
-  } else if (bvh.root >= node_count) {
-    out.add("root: index " + num(bvh.root) + " out of range (" + num(node_count) + " nodes)");
-  } else {
-    if (bvh.nodes[bvh.root].parent != kInvalidNode)
-      out.add("node " + num(bvh.root) + " (root): has parent link " + num(bvh.nodes[bvh.root].parent) +
-              ", expected none");
+void union_problem(Validation& v, uint32_t p, const Box& pbox, const Box& u) {
+  v.out.add("node " + num(p) + ": box is not the union of its children (children " + num(v.bvh.nodes[p].left()) +
+            " and " + num(v.bvh.nodes[p].right()) + "): box " + fmt_box(pbox) + ", union " + fmt_box(u));
+}
 
-    // Each node is pushed at most once (marked when pushed), so the walk ends after at
-    // most node_count steps whatever the links say: cycles and shared subtrees show up
-    // as a child that is already marked.
-    //
-    // The walk visits a compacted tree in index order and reads each node once, when it
-    // is popped; validating a 10M-triangle tree is bound by memory traffic, not by the
-    // checks. So a node's parent link is checked when the node is popped, and the union
-    // test of an inner node waits for its right child (far away in depth-first order):
-    // the right child's visit carries the parent's box and the left child's box (the
-    // left child is the parent's neighbour, cheap to read at once).
-    struct Visit {
-      uint32_t node, parent;
-      int side;
-      bool check_union;
-      Box parent_box, sibling_box;
-    };
-    std::vector<Visit> stack{{bvh.root, kInvalidNode, 0, false, {}, {}}};
-    reached[bvh.root] = 1;
-    auto union_problem = [&](uint32_t p, const Box& pbox, const Box& u) {
-      out.add("node " + num(p) + ": box is not the union of its children (children " + num(bvh.nodes[p].left()) +
-              " and " + num(bvh.nodes[p].right()) + "): box " + fmt_box(pbox) + ", union " + fmt_box(u));
-    };
-    while (!stack.empty()) {
-      const Visit v = stack.back();
-      stack.pop_back();
-      const uint32_t n = v.node;
-      const BvhNode& nd = bvh.nodes[n];
-      // Built only when there is something to report: formatting per node would dominate.
-      auto name = [n] { return "node " + num(n); };
+// What every node is checked for when popped: its parent link, the union its parent's
+// visit deferred to it, its cached area.
+void check_node(Validation& v, const Visit& visit) {
+  const uint32_t n = visit.node;
+  const BvhNode& nd = v.bvh.nodes[n];
+  if (visit.parent != kInvalidNode && nd.parent != visit.parent)
+    v.out.add("node " + num(n) + ": parent link is " + (nd.parent == kInvalidNode ? std::string("none") : num(nd.parent)) +
+              ", but it is the " + (visit.side == 0 ? "left" : "right") + " child of node " + num(visit.parent));
+  if (visit.check_union) {
+    const Box u = merge(visit.sibling_box, nd.box);
+    if (!(u == visit.parent_box)) union_problem(v, visit.parent, visit.parent_box, u);
+  }
+  if (!area_matches(nd.area, nd.box.area())) {
+    char buf[128];
+    std::snprintf(buf, sizeof buf, ": cached area %.9g differs from its box's area %.9g", nd.area, nd.box.area());
+    v.out.add("node " + num(n) + buf);
+  }
+}
 
-      if (v.parent != kInvalidNode && nd.parent != v.parent)
-        out.add(name() + ": parent link is " + (nd.parent == kInvalidNode ? std::string("none") : num(nd.parent)) +
-                ", but it is the " + (v.side == 0 ? "left" : "right") + " child of node " + num(v.parent));
-      if (v.check_union) {
-        const Box u = merge(v.sibling_box, nd.box);
-        if (!(u == v.parent_box)) union_problem(v.parent, v.parent_box, u);
-      }
-      if (!area_matches(nd.area, nd.box.area())) {
-        char buf[128];
-        std::snprintf(buf, sizeof buf, ": cached area %.9g differs from its box's area %.9g", nd.area, nd.box.area());
-        out.add(name() + buf);
-      }
-
-      if (!nd.is_leaf()) {
-        const uint32_t l = nd.left(), r = nd.right();
-        bool push[2] = {false, false};
-        for (int i = 0; i < 2; ++i) {
-          const uint32_t c = nd.child(i);
-          const char* side = i == 0 ? "left" : "right";
-          if (c >= node_count) {
-            out.add(name() + ": " + side + " child index " + num(c) + " out of range (" + num(node_count) + " nodes)");
-            continue;
-          }
-          if (reached[c]) {
-            out.add(name() + ": " + side + " child " + num(c) +
-                    (c == n ? " is the node itself" : " is already reached from elsewhere (cycle or shared subtree)"));
-            continue;
-          }
-          reached[c] = 1;
-          push[i] = true;
-        }
-        if (l == r && l < node_count) out.add(name() + ": both children are node " + num(l));
-        const bool both_in_range = l < node_count && r < node_count;
-        // Right first, so the left subtree is walked next, in index order.
-        if (push[1]) stack.push_back({r, n, 1, both_in_range, nd.box, both_in_range ? bvh.nodes[l].box : Box{}});
-        if (push[0]) stack.push_back({l, n, 0, false, {}, {}});
-        if (both_in_range && !push[1]) {
-          const Box u = merge(bvh.nodes[l].box, bvh.nodes[r].box);
-          if (!(u == nd.box)) union_problem(n, nd.box, u);
-        }
-        continue;
-      }
-
-      const uint64_t first = nd.first_ref(), count = nd.ref_count();
-      if (count == 0) {
-        out.add(name() + ": leaf holds no references");
-        continue;
-      }
-      if (first + count > slot_count) {
-        out.add(name() + ": leaf slots [" + num(first) + ", " + num(first + count) + ") out of range (" +
-                num(slot_count) + " slots)");
-        continue;
-      }
-      for (uint64_t s = first; s < first + count; ++s) {
-        if (slot_owner[s] != kInvalidNode) {
-          out.add(name() + ": slot " + num(s) + " is also used by leaf node " + num(slot_owner[s]));
-          continue;
-        }
-        slot_owner[s] = n;
-      }
+// Pushes the children not reached before (marking them), reports the others, and tests the
+// union here when the right child's visit cannot carry it.
+void visit_inner(Validation& v, uint32_t n, std::vector<uint8_t>& reached, std::vector<Visit>& stack) {
+  const BvhNode& nd = v.bvh.nodes[n];
+  const uint32_t l = nd.left(), r = nd.right();
+  bool push[2] = {false, false};
+  for (int i = 0; i < 2; ++i) {
+    const uint32_t c = nd.child(i);
+    const char* side = i == 0 ? "left" : "right";
+    if (c >= v.node_count) {
+      v.out.add("node " + num(n) + ": " + side + " child index " + num(c) + " out of range (" + num(v.node_count) +
+                " nodes)");
+      continue;
     }
+    if (reached[c]) {
+      v.out.add("node " + num(n) + ": " + side + " child " + num(c) +
+                (c == n ? " is the node itself" : " is already reached from elsewhere (cycle or shared subtree)"));
+      continue;
+    }
+    reached[c] = 1;
+    push[i] = true;
   }
+  if (l == r && l < v.node_count) v.out.add("node " + num(n) + ": both children are node " + num(l));
+  const bool both_in_range = l < v.node_count && r < v.node_count;
+  // Right first, so the left subtree is walked next, in index order.
+  if (push[1]) stack.push_back({r, n, 1, both_in_range, nd.box, both_in_range ? v.bvh.nodes[l].box : Box{}});
+  if (push[0]) stack.push_back({l, n, 0, false, {}, {}});
+  if (both_in_range && !push[1]) {
+    const Box u = merge(v.bvh.nodes[l].box, v.bvh.nodes[r].box);
+    if (!(u == nd.box)) union_problem(v, n, nd.box, u);
+  }
+}
 
-  // The references are checked in slot order rather than during the walk: slots are
-  // contiguous, while reference ids are in no particular order, so each reference costs
-  // a cache miss or two that prefetching a few slots ahead hides.
+// A leaf's slots: non-empty, in range, and used by no other leaf.
+void claim_leaf_slots(Validation& v, uint32_t n) {
+  const BvhNode& nd = v.bvh.nodes[n];
+  const uint64_t first = nd.first_ref(), count = nd.ref_count();
+  if (count == 0) {
+    v.out.add("node " + num(n) + ": leaf holds no references");
+    return;
+  }
+  if (first + count > v.slot_count) {
+    v.out.add("node " + num(n) + ": leaf slots [" + num(first) + ", " + num(first + count) + ") out of range (" +
+              num(v.slot_count) + " slots)");
+    return;
+  }
+  for (uint64_t s = first; s < first + count; ++s) {
+    if (v.slot_owner[s] != kInvalidNode) {
+      v.out.add("node " + num(n) + ": slot " + num(s) + " is also used by leaf node " + num(v.slot_owner[s]));
+      continue;
+    }
+    v.slot_owner[s] = n;
+  }
+}
+
+// Each node is pushed at most once (marked when pushed), so the walk ends after at most
+// node_count steps whatever the links say: cycles and shared subtrees show up as a child
+// that is already marked.
+void walk_tree(Validation& v) {
+  const Bvh& bvh = v.bvh;
+  if (bvh.root == kInvalidNode) {
+    if (v.ref_count > 0) v.out.add("tree is empty (no root) but there are " + num(v.ref_count) + " references");
+    return;
+  }
+  if (bvh.root >= v.node_count) {
+    v.out.add("root: index " + num(bvh.root) + " out of range (" + num(v.node_count) + " nodes)");
+    return;
+  }
+  if (bvh.nodes[bvh.root].parent != kInvalidNode)
+    v.out.add("node " + num(bvh.root) + " (root): has parent link " + num(bvh.nodes[bvh.root].parent) +
+              ", expected none");
+  std::vector<uint8_t> reached(v.node_count, 0);
+  std::vector<Visit> stack{{bvh.root, kInvalidNode, 0, false, {}, {}}};
+  reached[bvh.root] = 1;
+  while (!stack.empty()) {
+    const Visit visit = stack.back();
+    stack.pop_back();
+    check_node(v, visit);
+    if (bvh.nodes[visit.node].is_leaf())
+      claim_leaf_slots(v, visit.node);
+    else
+      visit_inner(v, visit.node, reached, stack);
+  }
+}
+
+// The references are checked in slot order rather than during the walk: slots are
+// contiguous, while reference ids are in no particular order, so each reference costs a
+// cache miss or two that prefetching a few slots ahead hides.
+void check_slots(Validation& v) {
+  const Bvh& bvh = v.bvh;
+  const PrimitiveRefs& refs = v.refs;
   constexpr size_t kAhead = 16;
-  for (size_t s = 0; s < slot_count; ++s) {
-    if (s + kAhead < slot_count) {
+  for (size_t s = 0; s < v.slot_count; ++s) {
+    if (s + kAhead < v.slot_count) {
       const uint32_t ahead = bvh.ref_indices[s + kAhead];
-      if (ahead < ref_count) {
+      if (ahead < v.ref_count) {
         __builtin_prefetch(&refs.boxes[ahead]);
-        __builtin_prefetch(&ref_slot[ahead]);
+        __builtin_prefetch(&v.ref_slot[ahead]);
       }
     }
     const uint32_t r = bvh.ref_indices[s];
-    const uint32_t owner = slot_owner[s];
+    const uint32_t owner = v.slot_owner[s];
     if (owner == kInvalidNode) {
-      out.add("slot " + num(s) + " (reference " + num(r) + ") is in no leaf");
+      v.out.add("slot " + num(s) + " (reference " + num(r) + ") is in no leaf");
       continue;
     }
-    if (r >= ref_count) {
-      out.add("node " + num(owner) + ": slot " + num(s) + " holds reference " + num(r) + ", out of range (" +
-              num(ref_count) + " references)");
+    if (r >= v.ref_count) {
+      v.out.add("node " + num(owner) + ": slot " + num(s) + " holds reference " + num(r) + ", out of range (" +
+                num(v.ref_count) + " references)");
       continue;
     }
-    if (ref_slot[r] != kInvalidNode) {
-      out.add("node " + num(owner) + ": reference " + num(r) + " (slot " + num(s) + ") is also in leaf node " +
-              num(slot_owner[ref_slot[r]]) + " (slot " + num(ref_slot[r]) + ")");
+    if (v.ref_slot[r] != kInvalidNode) {
+      v.out.add("node " + num(owner) + ": reference " + num(r) + " (slot " + num(s) + ") is also in leaf node " +
+                num(v.slot_owner[v.ref_slot[r]]) + " (slot " + num(v.ref_slot[r]) + ")");
       continue;
     }
-    ref_slot[r] = static_cast<uint32_t>(s);
+    v.ref_slot[r] = static_cast<uint32_t>(s);
     const Box& leaf_box = bvh.nodes[owner].box;
     if (!leaf_box.contains(refs.boxes[r]))
-      out.add("node " + num(owner) + ": leaf box " + fmt_box(leaf_box) + " does not contain the box of reference " +
-              num(r) + " (slot " + num(s) + ") " + fmt_box(refs.boxes[r]));
+      v.out.add("node " + num(owner) + ": leaf box " + fmt_box(leaf_box) + " does not contain the box of reference " +
+                num(r) + " (slot " + num(s) + ") " + fmt_box(refs.boxes[r]));
   }
+}
+
+void check_every_reference_in_a_leaf(Validation& v, const ValidationOptions& options) {
+  const PrimitiveRefs& refs = v.refs;
+  const size_t ref_count = v.ref_count;
   if (!options.allow_dropped_duplicates) {
     for (size_t r = 0; r < ref_count; ++r)
-      if (ref_slot[r] == kInvalidNode) out.add("reference " + num(r) + " is in no leaf");
+      if (v.ref_slot[r] == kInvalidNode) v.out.add("reference " + num(r) + " is in no leaf");
   } else if (refs.triangle_ids.size() == ref_count) {
     // A reference may be missing only where a leaf still holds its triangle.
     uint32_t max_triangle = 0;
     for (uint32_t t : refs.triangle_ids) max_triangle = std::max(max_triangle, t);
     std::vector<uint8_t> triangle_present(ref_count == 0 ? 0 : size_t(max_triangle) + 1, 0);
     for (size_t r = 0; r < ref_count; ++r)
-      if (ref_slot[r] != kInvalidNode) triangle_present[refs.triangle_ids[r]] = 1;
+      if (v.ref_slot[r] != kInvalidNode) triangle_present[refs.triangle_ids[r]] = 1;
     for (size_t r = 0; r < ref_count; ++r)
-      if (ref_slot[r] == kInvalidNode && !triangle_present[refs.triangle_ids[r]])
-        out.add("reference " + num(r) + " is in no leaf, and neither is any other reference to triangle " +
-                num(refs.triangle_ids[r]));
+      if (v.ref_slot[r] == kInvalidNode && !triangle_present[refs.triangle_ids[r]])
+        v.out.add("reference " + num(r) + " is in no leaf, and neither is any other reference to triangle " +
+                  num(refs.triangle_ids[r]));
   }
+}
+
+}  // namespace
+
+ValidationReport validate(const Bvh& bvh, const PrimitiveRefs& refs, const ValidationOptions& options) {
+  ValidationReport report;
+  Collector out(report);
+  Validation v(bvh, refs, out);
+  check_reference_arrays(v);
+  walk_tree(v);
+  check_slots(v);
+  check_every_reference_in_a_leaf(v, options);
   out.finish();
   return report;
 }

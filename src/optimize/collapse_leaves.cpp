@@ -1,6 +1,5 @@
 #include "bvhopt/collapse_leaves.h"
 
-#include <algorithm>
 #include <vector>
 
 #include "bvhopt/cost.h"
@@ -13,27 +12,12 @@ CollapseResult collapse_leaves(Bvh& bvh, const CollapseConfig& config) {
   const CostModel& m = config.cost;
   result.cost_before = sah_cost(bvh, m);
 
-  // The same recurrence, in the same order of operations, as optimal_collapse_cost, so the
-  // compacted tree's cost equals the `ocost` computed on the tree before.
-  const std::vector<uint32_t> post = bvh.post_order();
-  std::vector<double> best(bvh.nodes.size(), 0.0);
-  std::vector<uint64_t> count(bvh.nodes.size(), 0);
-  std::vector<char> collapse(bvh.nodes.size(), 0);
-  for (uint32_t n : post) {
-    const BvhNode& nd = bvh[n];
+  // The recurrence of optimal_collapse_cost, so the collapsed tree's cost equals the `ocost`
+  // computed on the tree before.
+  const std::vector<uint8_t> collapse = collapse_costs(bvh, m, config.max_leaf_size).collapse;
+  for (uint32_t n : bvh.post_order()) {
     result.nodes_before++;
-    if (nd.is_leaf()) {
-      result.leaves_before++;
-      count[n] = nd.ref_count();
-      best[n] = leaf_cost(nd.area, nd.ref_count(), m);
-      continue;
-    }
-    count[n] = count[nd.left()] + count[nd.right()];
-    const double as_tree = m.traversal * nd.area + best[nd.left()] + best[nd.right()];
-    const bool may_collapse = config.max_leaf_size == 0 || count[n] <= config.max_leaf_size;
-    const double as_leaf = m.intersection * nd.area * static_cast<double>(count[n]);
-    collapse[n] = may_collapse && as_leaf <= as_tree;
-    best[n] = collapse[n] ? as_leaf : as_tree;
+    result.leaves_before += bvh[n].is_leaf();
   }
 
   // Top-down: the first collapsible node on each path becomes a leaf holding, in

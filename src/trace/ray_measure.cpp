@@ -13,6 +13,9 @@
 #include <numeric>
 #include <random>
 
+#include "bvhopt/ray_triangle.h"
+#include "bvhopt/testing/brute_force.h"
+
 namespace bvhopt {
 
 void trace_rays(const Tracer& tracer, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits,

@@ -257,50 +257,40 @@ std::vector<Ray> camera_rays(const Camera& cam) {
   return rays;
 }
 
-RaySet make_ray_set(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& config) {
-  RaySet set;
-  set.kind = config.kind;
-  set.seed = config.seed;
-  set.query = config.kind == RayKind::shadow ? RayQuery::any : RayQuery::closest;
+namespace {
+
+// Segments between two uniform points of the box.
+std::vector<Ray> random_rays(const Box& box, uint64_t count, uint64_t seed) {
+  std::vector<Ray> rays;
+  rays.resize(count);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      Rng rng(seed, i);
+      Ray& ray = rays[i];
+      for (;;) {
+        const Vec3 a = box.min + box.extent() * Vec3(rng.uniform(), rng.uniform(), rng.uniform());
+        const Vec3 b = box.min + box.extent() * Vec3(rng.uniform(), rng.uniform(), rng.uniform());
+        if (a == b) continue;  // a zero direction cannot be traced
+        ray.org = a;
+        ray.dir = b - a;
+        ray.tmin = 0.0f;
+        ray.tmax = 1.0f;
+        break;
+      }
+    }
+  });
+  return rays;
+}
+
+// Rays started at the primary hits of the camera: ambient occlusion, shadow or path rays,
+// the image grown until its hits give `count` rays (or a sparse view gives what it can).
+std::vector<Ray> secondary_rays(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& config,
+                                const Camera& camera, uint64_t count) {
   const Box box = mesh_bounds(mesh);
   const float diagonal = length(box.extent());
   // Secondary rays start this far off the surface, along the normal, so they cannot hit
   // the triangle they leave through rounding of the hit point.
   const float offset = 1e-5f * std::max(diagonal, 1e-30f);
-  const Camera camera =
-      config.camera ? *config.camera : default_camera(mesh, tracer, config.width, config.height, config.up_axis);
-  const uint64_t count = config.count != 0 ? config.count
-                         : config.kind == RayKind::primary ? uint64_t(camera.width) * camera.height
-                                                           : 1'000'000;
-
-  if (config.kind == RayKind::primary) {
-    const Camera cam = config.count != 0 ? with_pixels(camera, double(count)) : camera;
-    set.width = cam.width;
-    set.height = cam.height;
-    set.rays = camera_rays(cam);
-    return set;
-  }
-  if (config.kind == RayKind::random) {
-    set.rays.resize(count);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 4096), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        Rng rng(config.seed, i);
-        Ray& ray = set.rays[i];
-        for (;;) {
-          const Vec3 a = box.min + box.extent() * Vec3(rng.uniform(), rng.uniform(), rng.uniform());
-          const Vec3 b = box.min + box.extent() * Vec3(rng.uniform(), rng.uniform(), rng.uniform());
-          if (a == b) continue;  // a zero direction cannot be traced
-          ray.org = a;
-          ray.dir = b - a;
-          ray.tmin = 0.0f;
-          ray.tmax = 1.0f;
-          break;
-        }
-      }
-    });
-    return set;
-  }
-
   uint32_t per_pixel = 1;
   if (config.kind == RayKind::ao) per_pixel = std::max<uint32_t>(config.ao_rays_per_hit, 1);
   if (config.kind == RayKind::path) per_pixel = 3;
@@ -350,19 +340,46 @@ RaySet make_ray_set(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& 
 
   // Grow the image until its hits give enough rays; the rays of one pixel stay together.
   Camera cam = with_pixels(camera, std::max<double>(1.0, double(count) / per_pixel));
+  std::vector<Ray> rays;
   for (int attempt = 0;; ++attempt) {
-    set.rays = from_primary_hits(mesh, tracer, cam, config.seed, per_pixel, emit);
-    if (set.rays.size() >= count) break;
-    if (attempt == 6 || set.rays.empty()) {
-      if (set.rays.empty())
+    rays = from_primary_hits(mesh, tracer, cam, config.seed, per_pixel, emit);
+    if (rays.size() >= count) break;
+    if (attempt == 6 || rays.empty()) {
+      if (rays.empty())
         throw Error(mesh.name + ": no " + std::string(ray_kind_name(config.kind)) +
                     " rays: the camera sees no geometry (set a camera position and target)");
       break;  // a sparse view: take what there is
     }
-    const double grow = std::min(16.0, 1.1 * double(count) / double(set.rays.size()));
+    const double grow = std::min(16.0, 1.1 * double(count) / double(rays.size()));
     cam = with_pixels(cam, double(cam.width) * cam.height * grow);
   }
-  if (set.rays.size() > count) set.rays.resize(count);
+  if (rays.size() > count) rays.resize(count);
+  return rays;
+}
+
+}  // namespace
+
+RaySet make_ray_set(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& config) {
+  RaySet set;
+  set.kind = config.kind;
+  set.seed = config.seed;
+  set.query = config.kind == RayKind::shadow ? RayQuery::any : RayQuery::closest;
+  const Camera camera =
+      config.camera ? *config.camera : default_camera(mesh, tracer, config.width, config.height, config.up_axis);
+  const uint64_t count = config.count != 0 ? config.count
+                         : config.kind == RayKind::primary ? uint64_t(camera.width) * camera.height
+                                                           : 1'000'000;
+
+  if (config.kind == RayKind::primary) {
+    const Camera cam = config.count != 0 ? with_pixels(camera, double(count)) : camera;
+    set.width = cam.width;
+    set.height = cam.height;
+    set.rays = camera_rays(cam);
+  } else if (config.kind == RayKind::random) {
+    set.rays = random_rays(mesh_bounds(mesh), count, config.seed);
+  } else {
+    set.rays = secondary_rays(mesh, tracer, config, camera, count);
+  }
   return set;
 }
 
