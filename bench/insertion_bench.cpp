@@ -171,8 +171,8 @@ int run(const Options& opt) {
     const double sah = sah_cost(sweep);
 
     InsertionConfig cfg;
-    cfg.max_passes = opt.max_passes;
-    cfg.time_limit_seconds = opt.time_limit;
+    cfg.limits.max_passes = opt.max_passes;
+    cfg.limits.time_limit = opt.time_limit;
     cfg.stop_after = opt.stop_after;
     OptRun p1 = opt.quick ? OptRun{} : run_optimizer(sweep, refs, cfg, 1, opt.runs);
     OptRun p2 = run_optimizer(sweep, refs, cfg, 2, opt.runs);
@@ -234,7 +234,7 @@ int run(const Options& opt) {
     row["final_ratio"] = ours / sah;
     row["passes"] = p2.report.passes;
     row["moves"] = p2.report.moves;
-    row["stop_reason"] = p2.report.stop_reason;
+    row["stop_reason"] = std::string(stop_reason_name(p2.report.stop_reason));
     row["optimize_seconds_2t"] = p2.seconds;
     row["optimize_over_build_2t"] = p2.seconds / build_s;
     // What the optimizer reaches within the time of the sweep build that precedes it.

@@ -322,7 +322,7 @@ int run(const Options& opt) {
       Bvh bvh = sweep1;
       const double s = seconds_of([&] {
         InsertionConfig c;
-        c.time_limit_seconds = opt.best_seconds;
+        c.limits.time_limit = opt.best_seconds;
         optimize_insertion(bvh, c);
         CollapseConfig cc;
         cc.max_leaf_size = opt.best_leaf;
@@ -348,7 +348,7 @@ int run(const Options& opt) {
       {
         Bvh bvh = sweep1;
         InsertionConfig c;
-        c.time_limit_seconds = opt.opt_seconds;
+        c.limits.time_limit = opt.opt_seconds;
         const double s = seconds_of([&] { optimize_insertion(bvh, c); });
         add_tree("sweep+insertion", std::move(bvh), s);
       }

@@ -156,7 +156,7 @@ void register_demo_command(CLI::App& app) {
       Bvh bvh = sweep;
       HillClimbConfig config;
       config.cost = model;
-      config.on_pass = on_pass("sweep+hill-climb");
+      config.limits.on_pass = on_pass("sweep+hill-climb");
       OptimizeReport r = hill_climb(bvh, config);
       measure("sweep+hill-climb", sweep_s + r.seconds, bvh);
     }
@@ -166,7 +166,7 @@ void register_demo_command(CLI::App& app) {
       config.cost = model;
       config.seed = opt->seed;
       if (opt->quick) config.schedule_passes = 250;
-      config.on_pass = on_pass("sweep+anneal");
+      config.limits.on_pass = on_pass("sweep+anneal");
       OptimizeReport r = anneal(bvh, config);
       measure("sweep+anneal", sweep_s + r.seconds, bvh);
     }
@@ -175,7 +175,8 @@ void register_demo_command(CLI::App& app) {
       InsertionConfig config;
       config.cost = model;
       config.seed = opt->seed;
-      OptimizeReport r = optimize_insertion(bvh, config, on_pass("sweep+insertion"));
+      config.limits.on_pass = on_pass("sweep+insertion");
+      OptimizeReport r = optimize_insertion(bvh, config);
       measure("sweep+insertion", sweep_s + r.seconds, bvh);
       Stopwatch clock;
       CollapseConfig cc;

@@ -1,17 +1,15 @@
 // bvhopt optimize: improves an existing tree (a BVH file, or a scene built with sweep SAH and
 // one reference per leaf) with one of the optimizers, and saves it.
 //
-// The methods are a table: each entry names itself, registers its own options and runs on
-// the shared settings (cost model, pass and time limits, seed, per-pass callback). Loading,
-// the progress line, the cost trace, the summary and writing the file know nothing of the
-// method. To add one (e.g. insertion-based optimization with --batch and --measure), append
-// an entry to method_table() with its options struct held by a shared_ptr.
+// The options bind straight to the library's config structs, so every default is the
+// library's own; the method names come from the library too. Loading, the progress line, the
+// cost trace, the summary and writing the file know nothing of the method: to add one, give
+// it a name in optimizer_method.h, its options in add_method_options and a case in
+// run_method.
 #include <filesystem>
-#include <fstream>
-#include <functional>
 #include <iostream>
-#include <memory>
 #include <sstream>
+#include <string>
 #include <vector>
 
 #include "bvhopt/atomic_file.h"
@@ -19,6 +17,7 @@
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
 #include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/optimizer_method.h"
 #include "bvhopt/references.h"
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/tree_rotations.h"
@@ -28,96 +27,107 @@
 namespace bvhopt::cli {
 namespace {
 
-// What every method gets from the shared options.
-struct RunSettings {
-  CostModel cost;
-  uint32_t max_passes = 0;   // 0: the method's own stopping rule only
-  double time_limit = 0.0;   // seconds, 0: none
-  uint64_t seed = 1;
-  PassCallback on_pass;
+struct OptimizeOptions {
+  SceneOption input;
+  EvhOption evh;
+  ThreadsOption threads;
+  CostOption cost;
+  bool cost_given = false;  // --ct or --ci given: they replace a BVH file's own cost model
+  std::string method = std::string(optimizer_method_name(OptimizerMethod::anneal));
+  // What every method shares: --passes, --time-limit and --seed (the cost model and the
+  // callback are filled in at run time).
+  OptimizerConfig shared;
+  AnnealConfig anneal;
+  bool no_keep_best = false;
+  InsertionConfig insertion;
+  std::string measure = std::string(measure_name(InsertionConfig{}.measure));
+  std::string form = std::string(form_name(InsertionConfig{}.form));
+  std::string trace_path;
+  std::string output;
+  bool json = false;
 };
 
-struct Method {
-  std::string name;  // the --method value, also appended to the file's method string
-  std::string help;
-  std::function<void(CLI::App*)> add_options;  // method-specific options (may be empty)
-  std::function<OptimizeReport(Bvh&, const RunSettings&)> run;
-};
+std::string method_help(OptimizerMethod m) {
+  switch (m) {
+    case OptimizerMethod::hill_climb: return "Kensler's tree rotations, hill climbing until no move improves";
+    case OptimizerMethod::anneal: return "Kensler's tree rotations with simulated annealing";
+    case OptimizerMethod::insertion:
+      return "Bittner et al.'s insertion-based optimization: remove nodes, reinsert their children at the best place";
+  }
+  return "";
+}
 
-std::vector<Method> method_table() {
-  std::vector<Method> table;
+template <class T, class Name>
+std::vector<std::string> names_of(const std::vector<T>& values, Name name) {
+  std::vector<std::string> names;
+  for (T v : values) names.emplace_back(name(v));
+  return names;
+}
 
-  table.push_back({"hill-climb", "Kensler's tree rotations, hill climbing until no move improves", nullptr,
-                   [](Bvh& bvh, const RunSettings& s) {
-                     HillClimbConfig cfg;
-                     cfg.cost = s.cost;
-                     cfg.limits = {s.max_passes, s.time_limit};
-                     cfg.on_pass = s.on_pass;
-                     return hill_climb(bvh, cfg);
-                   }});
+std::string joined(const std::vector<std::string>& names) {
+  std::string s;
+  for (const std::string& n : names) s += (s.empty() ? "" : " | ") + n;
+  return s;
+}
 
-  auto anneal_opt = std::make_shared<AnnealConfig>();
-  auto no_keep_best = std::make_shared<bool>(false);
-  table.push_back({"anneal", "Kensler's tree rotations with simulated annealing",
-                   [anneal_opt, no_keep_best](CLI::App* cmd) {
-                     cmd->add_option("--schedule-passes", anneal_opt->schedule_passes,
-                                     "anneal: schedule length N in passes (then the quench)")
-                         ->capture_default_str();
-                     cmd->add_option("--period", anneal_opt->period, "anneal: period f of the sine schedule, in passes")
-                         ->check(CLI::PositiveNumber)
-                         ->capture_default_str();
-                     cmd->add_option("--h", anneal_opt->h, "anneal: hottest temperature, in Kensler's units (0.8-2.2)")
-                         ->check(CLI::NonNegativeNumber)
-                         ->capture_default_str();
-                     cmd->add_flag("--no-keep-best", *no_keep_best,
-                                   "anneal: return the last tree, not the best seen at the end of a pass");
-                   },
-                   [anneal_opt, no_keep_best](Bvh& bvh, const RunSettings& s) {
-                     AnnealConfig cfg = *anneal_opt;
-                     cfg.cost = s.cost;
-                     cfg.seed = s.seed;
-                     cfg.keep_best = !*no_keep_best;
-                     cfg.limits = {s.max_passes, s.time_limit};
-                     cfg.on_pass = s.on_pass;
-                     return anneal(bvh, cfg);
-                   }});
+void add_method_options(CLI::App* cmd, OptimizeOptions& opt) {
+  cmd->add_option("--schedule-passes", opt.anneal.schedule_passes,
+                  "anneal: schedule length N in passes (then the quench)")
+      ->capture_default_str();
+  cmd->add_option("--period", opt.anneal.period, "anneal: period f of the sine schedule, in passes")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--h", opt.anneal.h, "anneal: hottest temperature, in Kensler's units (0.8-2.2)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_flag("--no-keep-best", opt.no_keep_best,
+                "anneal: return the last tree, not the best seen at the end of a pass");
 
-  // Insertion-based optimization (issue 4).
-  auto insertion_opt = std::make_shared<InsertionConfig>();
-  auto insertion_measure = std::make_shared<std::string>("area");
-  auto insertion_form = std::make_shared<std::string>("hybrid");
-  table.push_back(
-      {"insertion", "Bittner et al.'s insertion-based optimization: remove nodes, reinsert their children at the best place",
-       [insertion_opt, insertion_measure, insertion_form](CLI::App* cmd) {
-         cmd->add_option("--batch", insertion_opt->batch, "insertion: fraction of the inner nodes updated per pass")
-             ->check(CLI::Range(0.0, 1.0))
-             ->capture_default_str();
-         cmd->add_option("--measure", *insertion_measure, "insertion: node selection measure (area | sum | min | comb)")
-             ->check(CLI::IsMember({"area", "sum", "min", "comb"}))
-             ->capture_default_str();
-         cmd->add_option("--form", *insertion_form,
-                         "insertion: sequential (the paper's) | parallel (deterministic) | hybrid (the first, then the second)")
-             ->check(CLI::IsMember({"sequential", "parallel", "hybrid"}))
-             ->capture_default_str();
-         cmd->add_option("--random-after", insertion_opt->random_after,
-                         "insertion: passes without improvement before random selection (p_R)")
-             ->capture_default_str();
-         cmd->add_option("--stop-after", insertion_opt->stop_after,
-                         "insertion: passes without improvement before stopping (p_T)")
-             ->check(CLI::PositiveNumber)
-             ->capture_default_str();
-       },
-       [insertion_opt, insertion_measure, insertion_form](Bvh& bvh, const RunSettings& s) {
-         InsertionConfig cfg = *insertion_opt;
-         cfg.cost = s.cost;
-         cfg.seed = s.seed;
-         cfg.measure = parse_measure(*insertion_measure).value_or(InsertionMeasure::area);
-         cfg.form = parse_form(*insertion_form).value_or(InsertionForm::hybrid);
-         if (s.max_passes > 0) cfg.max_passes = s.max_passes;  // else the default cap stays as a safety net
-         cfg.time_limit_seconds = s.time_limit;
-         return optimize_insertion(bvh, cfg, s.on_pass);
-       }});
-  return table;
+  cmd->add_option("--batch", opt.insertion.batch, "insertion: fraction of the inner nodes updated per pass")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  const std::vector<std::string> measures = names_of(insertion_measures(), measure_name);
+  cmd->add_option("--measure", opt.measure, "insertion: node selection measure (" + joined(measures) + ")")
+      ->check(CLI::IsMember(measures))
+      ->capture_default_str();
+  cmd->add_option("--form", opt.form,
+                  "insertion: sequential (the paper's) | parallel (deterministic) | hybrid (the first, then the second)")
+      ->check(CLI::IsMember(names_of(insertion_forms(), form_name)))
+      ->capture_default_str();
+  cmd->add_option("--random-after", opt.insertion.random_after,
+                  "insertion: passes without improvement before random selection (p_R)")
+      ->capture_default_str();
+  cmd->add_option("--stop-after", opt.insertion.stop_after,
+                  "insertion: passes without improvement before stopping (p_T)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+}
+
+// Runs the chosen method with the shared settings over its own.
+OptimizeReport run_method(Bvh& bvh, OptimizerMethod method, const OptimizeOptions& opt, const OptimizerConfig& shared) {
+  switch (method) {
+    case OptimizerMethod::hill_climb: {
+      HillClimbConfig cfg;
+      static_cast<OptimizerConfig&>(cfg) = shared;
+      return hill_climb(bvh, cfg);
+    }
+    case OptimizerMethod::anneal: {
+      AnnealConfig cfg = opt.anneal;
+      static_cast<OptimizerConfig&>(cfg) = shared;
+      cfg.keep_best = !opt.no_keep_best;
+      return anneal(bvh, cfg);
+    }
+    case OptimizerMethod::insertion: {
+      InsertionConfig cfg = opt.insertion;
+      const uint32_t default_cap = cfg.limits.max_passes;
+      static_cast<OptimizerConfig&>(cfg) = shared;
+      if (cfg.limits.max_passes == 0) cfg.limits.max_passes = default_cap;  // the cap stays as a safety net
+      cfg.measure = parse_measure(opt.measure).value_or(cfg.measure);
+      cfg.form = parse_form(opt.form).value_or(cfg.form);
+      return optimize_insertion(bvh, cfg);
+    }
+  }
+  throw Error("optimize: unknown method");
 }
 
 struct Loaded {
@@ -170,89 +180,14 @@ void write_trace_csv(const std::string& path, const OptimizeReport& report) {
   write_text_atomically(path, f.str());
 }
 
-}  // namespace
-
-void register_optimize_command(CLI::App& app) {
-  struct Options {
-    SceneOption input;
-    EvhOption evh;
-    ThreadsOption threads;
-    CostOption cost;
-    std::string method = "anneal";
-    uint32_t passes = 0;
-    double time_limit = 0.0;
-    uint64_t seed = 1;
-    std::string trace_path;
-    std::string output;
-    bool json = false;
-  };
-  auto opt = std::make_shared<Options>();
-  auto methods = std::make_shared<std::vector<Method>>(method_table());
-
-  CLI::App* cmd = app.add_subcommand(
-      "optimize", "Improve a BVH (a .bvh file, or a scene built with sweep SAH, one reference per leaf) and save it");
-  opt->input.add_to(cmd, "input");
-  cmd->get_option("input")->description(
-      "A BVH file (*.bvh, from bvhopt build or optimize), or a scene: a file assimp reads or "
-      "builtin[:atrium][?triangles=N&seed=S], built with sweep SAH, one reference per leaf");
-  std::vector<std::string> names;
-  std::string method_help = "Optimizer:";
-  for (const Method& m : *methods) {
-    names.push_back(m.name);
-    method_help += "\n  " + m.name + ": " + m.help;
-  }
-  cmd->add_option("--method", opt->method, method_help)->check(CLI::IsMember(names))->capture_default_str();
-  cmd->add_option("--passes", opt->passes, "Stop after this many passes (0: no limit)")->capture_default_str();
-  cmd->add_option("--time-limit", opt->time_limit, "Stop after the pass that reaches this many seconds (0: none)")
-      ->check(CLI::NonNegativeNumber)
-      ->type_name("S");
-  cmd->add_option("--seed", opt->seed, "Seed of every random choice")->capture_default_str();
-  cmd->add_option("--cost-trace", opt->trace_path, "Write the cost after every pass as CSV")->type_name("FILE.csv");
-  opt->evh.add_to(cmd);
-  opt->cost.add_to(cmd);
-  opt->threads.add_to(cmd);
-  for (const Method& m : *methods)
-    if (m.add_options) m.add_options(cmd);
-  cmd->add_option("-o,--output", opt->output, "BVH file to write")->required();
-  cmd->add_flag("--json", opt->json, "Print the summary as JSON");
-
-  cmd->callback([opt, methods, cmd] {
-    auto threads = opt->threads.apply();
-    const bool cost_given = cmd->count("--ct") > 0 || cmd->count("--ci") > 0;
-    Loaded in = load_input(opt->input, opt->evh, opt->cost.model(), cost_given);
-    const Method* method = nullptr;
-    for (const Method& m : *methods)
-      if (m.name == opt->method) method = &m;
-    if (!method) throw Error("optimize: unknown method '" + opt->method + "'");
-
-    ProgressLine progress;
-    RunSettings settings;
-    settings.cost = in.info.cost;
-    settings.max_passes = opt->passes;
-    settings.time_limit = opt->time_limit;
-    settings.seed = opt->seed;
-    settings.on_pass = [&progress](const PassRecord& p) {
-      std::ostringstream line;
-      line << "pass " << p.pass << "  T " << format_double(p.temperature, 3) << "  cost " << format_double(p.cost, 4)
-           << "  best " << format_double(p.best_cost, 4) << "  " << format_double(p.seconds, 1) << " s";
-      progress.update(line.str());
-    };
-    OptimizeReport report = method->run(in.bvh, settings);
-    progress.finish();
-
-    if (!opt->trace_path.empty()) write_trace_csv(opt->trace_path, report);
-    BvhFileInfo info = in.info;
-    info.method = (info.method.empty() ? std::string("unknown") : info.method) + "+" + method->name;
-    write_bvh_file(opt->output, in.bvh, in.refs, info);
-    const double ocost = optimal_collapse_cost(in.bvh, info.cost);
-
-    if (opt->json) {
-      print_json({{"input", opt->input.spec},
-                  {"method", method->name},
+void print_report_json(const OptimizeOptions& opt, const Loaded& in, const BvhFileInfo& info, const OptimizeReport& report,
+                       double ocost) {
+  print_json({{"input", opt.input.spec},
+                  {"method", opt.method},
                   {"file_method", info.method},
                   {"triangles", info.scene_triangles},
-                  {"threads", opt->threads.effective()},
-                  {"seed", opt->seed},
+                  {"threads", opt.threads.effective()},
+                  {"seed", opt.shared.seed},
                   {"load_seconds", in.load_seconds},
                   {"build_seconds", in.build_seconds},
                   {"cost_before", report.initial_cost},
@@ -262,24 +197,93 @@ void register_optimize_command(CLI::App& app) {
                   {"passes", report.passes},
                   {"moves", report.moves},
                   {"seconds", report.seconds},
-                  {"stop_reason", report.stop_reason},
-                  {"cost_trace", opt->trace_path},
-                  {"output", opt->output}});
-      return;
-    }
-    const double ratio = report.initial_cost > 0 ? report.final_cost / report.initial_cost : 1.0;
-    std::cout << "input      " << opt->input.spec << " (" << info.scene_triangles << " triangles"
-              << (in.build_seconds > 0 ? ", sweep SAH built in " + format_double(in.build_seconds, 2) + " s" : "")
-              << ")\n"
-              << "method     " << method->name << ", " << opt->threads.effective() << " threads, seed " << opt->seed
-              << "\n"
-              << "cost       " << format_double(report.initial_cost, 4) << " -> " << format_double(report.final_cost, 4)
-              << "  (" << format_double(100.0 * ratio, 2) << " %)\n"
-              << "ocost      " << format_double(ocost, 4) << "\n"
-              << "passes     " << report.passes << " (" << report.stop_reason << "), " << report.moves << " moves\n"
-              << "time       " << format_double(report.seconds, 3) << " s\n"
-              << "written    " << opt->output << " (" << info.method << ")\n";
-    if (!opt->trace_path.empty()) std::cout << "cost trace " << opt->trace_path << "\n";
+                  {"stop_reason", std::string(stop_reason_name(report.stop_reason))},
+                  {"cost_trace", opt.trace_path},
+                  {"output", opt.output}});
+}
+
+void print_summary(const OptimizeOptions& opt, const Loaded& in, const BvhFileInfo& info, const OptimizeReport& report,
+                   double ocost) {
+  const double ratio = report.initial_cost > 0 ? report.final_cost / report.initial_cost : 1.0;
+  std::cout << "input      " << opt.input.spec << " (" << info.scene_triangles << " triangles"
+            << (in.build_seconds > 0 ? ", sweep SAH built in " + format_double(in.build_seconds, 2) + " s" : "")
+            << ")\n"
+            << "method     " << opt.method << ", " << opt.threads.effective() << " threads, seed " << opt.shared.seed
+            << "\n"
+            << "cost       " << format_double(report.initial_cost, 4) << " -> " << format_double(report.final_cost, 4)
+            << "  (" << format_double(100.0 * ratio, 2) << " %)\n"
+            << "ocost      " << format_double(ocost, 4) << "\n"
+            << "passes     " << report.passes << " (" << stop_reason_name(report.stop_reason) << "), " << report.moves
+            << " moves\n"
+            << "time       " << format_double(report.seconds, 3) << " s\n"
+            << "written    " << opt.output << " (" << info.method << ")\n";
+  if (!opt.trace_path.empty()) std::cout << "cost trace " << opt.trace_path << "\n";
+}
+
+void run_optimize(const OptimizeOptions& opt) {
+  auto threads = opt.threads.apply();
+  Loaded in = load_input(opt.input, opt.evh, opt.cost.model(), opt.cost_given);
+  const std::optional<OptimizerMethod> method = parse_optimizer_method(opt.method);
+  if (!method) throw Error("optimize: unknown method '" + opt.method + "'");
+
+  ProgressLine progress;
+  OptimizerConfig shared = opt.shared;
+  shared.cost = in.info.cost;
+  shared.limits.on_pass = [&progress](const PassRecord& p) {
+    std::ostringstream line;
+    line << "pass " << p.pass << "  T " << format_double(p.temperature, 3) << "  cost " << format_double(p.cost, 4)
+         << "  best " << format_double(p.best_cost, 4) << "  " << format_double(p.seconds, 1) << " s";
+    progress.update(line.str());
+  };
+  OptimizeReport report = run_method(in.bvh, *method, opt, shared);
+  progress.finish();
+
+  if (!opt.trace_path.empty()) write_trace_csv(opt.trace_path, report);
+  BvhFileInfo info = in.info;
+  info.method = (info.method.empty() ? std::string("unknown") : info.method) + "+" + opt.method;
+  write_bvh_file(opt.output, in.bvh, in.refs, info);
+  const double ocost = optimal_collapse_cost(in.bvh, info.cost);
+  if (opt.json)
+    print_report_json(opt, in, info, report, ocost);
+  else
+    print_summary(opt, in, info, report, ocost);
+}
+
+}  // namespace
+
+void register_optimize_command(CLI::App& app) {
+  auto opt = std::make_shared<OptimizeOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "optimize", "Improve a BVH (a .bvh file, or a scene built with sweep SAH, one reference per leaf) and save it");
+  opt->input.add_to(cmd, "input");
+  cmd->get_option("input")->description(
+      "A BVH file (*.bvh, from bvhopt build or optimize), or a scene: a file assimp reads or "
+      "builtin[:atrium][?triangles=N&seed=S], built with sweep SAH, one reference per leaf");
+  std::vector<std::string> names;
+  std::string help = "Optimizer:";
+  for (OptimizerMethod m : optimizer_methods()) {
+    names.emplace_back(optimizer_method_name(m));
+    help += "\n  " + names.back() + ": " + method_help(m);
+  }
+  cmd->add_option("--method", opt->method, help)->check(CLI::IsMember(names))->capture_default_str();
+  cmd->add_option("--passes", opt->shared.limits.max_passes, "Stop after this many passes (0: no limit)")
+      ->capture_default_str();
+  cmd->add_option("--time-limit", opt->shared.limits.time_limit,
+                  "Stop after the pass that reaches this many seconds (0: none)")
+      ->check(CLI::NonNegativeNumber)
+      ->type_name("S");
+  cmd->add_option("--seed", opt->shared.seed, "Seed of every random choice")->capture_default_str();
+  cmd->add_option("--cost-trace", opt->trace_path, "Write the cost after every pass as CSV")->type_name("FILE.csv");
+  opt->evh.add_to(cmd);
+  opt->cost.add_to(cmd);
+  opt->threads.add_to(cmd);
+  add_method_options(cmd, *opt);
+  cmd->add_option("-o,--output", opt->output, "BVH file to write")->required();
+  cmd->add_flag("--json", opt->json, "Print the summary as JSON");
+
+  cmd->callback([opt, cmd] {
+    opt->cost_given = cmd->count("--ct") > 0 || cmd->count("--ci") > 0;
+    run_optimize(*opt);
   });
 }
 

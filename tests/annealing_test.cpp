@@ -115,7 +115,7 @@ TEST(Anneal, KeepBestReturnsTheBestPassAndNeverWorsens) {
   EXPECT_TRUE(rose) << "hot passes should accept some worse moves";
   EXPECT_EQ(rep.final_cost, best);
   EXPECT_EQ(sah_cost(bvh), best);
-  EXPECT_EQ(rep.stop_reason, "converged");
+  EXPECT_EQ(rep.stop_reason, StopReason::converged);
   EXPECT_GT(rep.passes, cfg.schedule_passes);
   EXPECT_EQ(rep.trace.back().moves, 0u);
 }
@@ -129,7 +129,7 @@ TEST(Anneal, WithoutKeepBestReturnsTheLastTree) {
   cfg.h = 2.2;
   cfg.keep_best = false;
   OptimizeReport rep = anneal(bvh, cfg);
-  EXPECT_EQ(rep.stop_reason, "pass limit");
+  EXPECT_EQ(rep.stop_reason, StopReason::pass_limit);
   EXPECT_EQ(rep.passes, 40u);
   EXPECT_EQ(rep.final_cost, rep.trace.back().cost);
   EXPECT_EQ(sah_cost(bvh), rep.trace.back().cost);
@@ -160,7 +160,7 @@ TEST(Anneal, PassLimitOfOneGivesOnePass) {
   cfg.limits.max_passes = 1;
   OptimizeReport rep = anneal(bvh, cfg);
   EXPECT_EQ(rep.passes, 1u);
-  EXPECT_EQ(rep.stop_reason, "pass limit");
+  EXPECT_EQ(rep.stop_reason, StopReason::pass_limit);
   EXPECT_TRUE(validate(bvh, refs).ok());
 }
 

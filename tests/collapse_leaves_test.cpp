@@ -49,7 +49,7 @@ TEST(Compaction, EqualsOcostAndNeverRaisesTheCost) {
     Bvh bvh = seed % 3 == 0 ? build_spatial_median(refs) : build_sweep_sah(refs);
     if (seed % 2 == 0) {
       InsertionConfig ic;
-      ic.max_passes = 20;
+      ic.limits.max_passes = 20;
       optimize_insertion(bvh, ic);
     }
     for (uint32_t max_leaf : {0u, 2u, 4u, 8u}) {

@@ -10,6 +10,7 @@
 #include "bvhopt/insertion_optimizer.h"
 #include "bvhopt/median_builder.h"
 #include "bvhopt/sweep_sah_builder.h"
+#include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/validate.h"
 #include "test_support.h"
 
@@ -52,7 +53,7 @@ TEST(InsertionSearch, BranchAndBoundEqualsBruteForce) {
       }
     }
     ReinsertionCandidate fast = find_reinsertion(bvh, box, skip, through);
-    ReinsertionCandidate slow = find_reinsertion_brute_force(bvh, box, skip, through);
+    ReinsertionCandidate slow = testing::find_reinsertion_brute_force(bvh, box, skip, through);
     ASSERT_NE(fast.node, kInvalidNode) << "trial " << trial;
     ASSERT_EQ(fast.cost, slow.cost) << "trial " << trial << " refs " << count;
     ASSERT_NE(fast.node, skip);
@@ -105,7 +106,7 @@ TEST(InsertionSearch, AfterRemovalEqualsBruteForceOnTheRemovedTree) {
       removed[s].parent = g;
       removed.refit_upwards(g);
     }
-    ReinsertionCandidate slow = find_reinsertion_brute_force(removed, box);
+    ReinsertionCandidate slow = testing::find_reinsertion_brute_force(removed, box);
     ASSERT_EQ(fast.cost, slow.cost) << "trial " << trial;
     ASSERT_NEAR(freed, before - inner_sum(removed, removed.root) - carried, 1e-9 * before) << "trial " << trial;
     ++checked;
@@ -132,16 +133,16 @@ void check_every_move(InsertionForm form, InsertionMeasure measure) {
   cfg.form = form;
   cfg.measure = measure;
   cfg.batch = 0.05;
-  cfg.max_passes = 30;
+  cfg.limits.max_passes = 30;
   uint64_t checked = 0;
-  cfg.after_move = [&](const Bvh& t, double tracked) {
+  auto after_move = [&](const Bvh& t, double tracked) {
     ValidationReport v = validate(t, refs);
     ASSERT_TRUE(v.ok()) << v.summary();
     ASSERT_EQ(t.nodes.size(), 2 * refs.size() - 1);
     ASSERT_LT(relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
     ++checked;
   };
-  OptimizeReport r = optimize_insertion(bvh, cfg);
+  OptimizeReport r = testing::optimize_insertion_observed(bvh, cfg, after_move);
   EXPECT_GT(checked, 20u);
   EXPECT_TRUE(validate(bvh, refs).ok());
   EXPECT_LT(relative_gap(r.final_cost, sah_cost(bvh)), 1e-9);
@@ -239,7 +240,7 @@ TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreads) {
       InsertionConfig cfg;
       cfg.form = form;
       cfg.seed = 99;
-      cfg.max_passes = 400;
+      cfg.limits.max_passes = 400;
       cfg.random_after = 1;         // random passes too
       cfg.stop_after = 4;           // so that both stages end well within the pass limit
       cfg.min_improvement = 1e-3;
@@ -249,8 +250,8 @@ TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreads) {
       passes[t] = r.passes;
       EXPECT_GT(r.moves, 100u);
       // Both stages of the hybrid ran to convergence within the pass limit.
-      EXPECT_EQ(r.stop_reason, "converged");
-      EXPECT_LT(r.passes, cfg.max_passes);
+      EXPECT_EQ(r.stop_reason, StopReason::converged);
+      EXPECT_LT(r.passes, cfg.limits.max_passes);
     }
     EXPECT_EQ(passes[0], passes[1]);
     EXPECT_EQ(cost[0], cost[1]);
@@ -266,7 +267,7 @@ TEST(InsertionOptimizer, SameSeedSameTreeSequential) {
     InsertionConfig cfg;
     cfg.form = InsertionForm::sequential;
     cfg.random_after = 1;
-    cfg.max_passes = 30;
+    cfg.limits.max_passes = 30;
     optimize_insertion(bvh, cfg);
     sig[t] = testing::tree_signature(bvh, refs);
   }
@@ -282,14 +283,15 @@ TEST(InsertionOptimizer, PassLimitEndsAnOscillatingRun) {
     InsertionConfig cfg;
     cfg.form = form;
     cfg.stop_after = std::numeric_limits<uint32_t>::max();
-    cfg.max_passes = 200;
+    cfg.limits.max_passes = 200;
     cfg.batch = 0.2;
     uint32_t callbacks = 0;
-    OptimizeReport r = optimize_insertion(bvh, cfg, [&](const PassRecord&) { ++callbacks; });
+    cfg.limits.on_pass = [&](const PassRecord&) { ++callbacks; };
+    OptimizeReport r = optimize_insertion(bvh, cfg);
     EXPECT_EQ(r.passes, 200u);
     EXPECT_EQ(callbacks, 200u);
     EXPECT_EQ(r.trace.size(), 200u);
-    EXPECT_EQ(r.stop_reason, "pass limit");
+    EXPECT_EQ(r.stop_reason, StopReason::pass_limit);
     EXPECT_TRUE(validate(bvh, refs).ok());
   }
 }
@@ -298,9 +300,9 @@ TEST(InsertionOptimizer, ConvergesWithoutAPassLimit) {
   PrimitiveRefs refs = testing::random_refs(1000, 14);
   Bvh bvh = build_sweep_sah(refs);
   InsertionConfig cfg;
-  cfg.max_passes = std::numeric_limits<uint32_t>::max();
+  cfg.limits.max_passes = std::numeric_limits<uint32_t>::max();
   OptimizeReport r = optimize_insertion(bvh, cfg);
-  EXPECT_EQ(r.stop_reason, "converged");
+  EXPECT_EQ(r.stop_reason, StopReason::converged);
   double lowest = r.initial_cost;
   for (const PassRecord& p : r.trace) lowest = std::min(lowest, p.cost);
   EXPECT_EQ(r.trace.back().best_cost, lowest);
@@ -329,7 +331,7 @@ TEST(InsertionOptimizer, TinyTreesAreLeftAlone) {
     Bvh bvh = build_sweep_sah(refs);
     std::string before = testing::tree_signature(bvh, refs);
     OptimizeReport r = optimize_insertion(bvh);
-    EXPECT_EQ(r.stop_reason, "nothing to optimize");
+    EXPECT_EQ(r.stop_reason, StopReason::nothing_to_optimize);
     EXPECT_EQ(testing::tree_signature(bvh, refs), before);
   }
 }

@@ -191,7 +191,7 @@ TEST(HillClimb, NeverRaisesCostAndEndsInALocalMinimum) {
       const double before = sah_cost(bvh, model);
       OptimizeReport rep = hill_climb(bvh);
       ASSERT_TRUE(validate(bvh, refs).ok()) << validate(bvh, refs).summary();
-      EXPECT_EQ(rep.stop_reason, "converged");
+      EXPECT_EQ(rep.stop_reason, StopReason::converged);
       EXPECT_NEAR(rep.initial_cost, before, 1e-12 * before);
       EXPECT_EQ(rep.final_cost, sah_cost(bvh, model));
       EXPECT_LE(rep.final_cost, before);
@@ -242,7 +242,7 @@ TEST(HillClimb, PassAndTimeLimits) {
     HillClimbConfig cfg;
     cfg.limits.max_passes = 1;
     int calls = 0;
-    cfg.on_pass = [&](const PassRecord& p) {
+    cfg.limits.on_pass = [&](const PassRecord& p) {
       ++calls;
       EXPECT_EQ(p.pass, 1u);
     };
@@ -250,7 +250,7 @@ TEST(HillClimb, PassAndTimeLimits) {
     EXPECT_EQ(rep.passes, 1u);
     EXPECT_EQ(rep.trace.size(), 1u);
     EXPECT_EQ(calls, 1);
-    EXPECT_EQ(rep.stop_reason, "pass limit");
+    EXPECT_EQ(rep.stop_reason, StopReason::pass_limit);
     EXPECT_TRUE(validate(bvh, refs).ok());
     EXPECT_EQ(rep.final_cost, sah_cost(bvh));
   }
@@ -267,7 +267,7 @@ TEST(HillClimb, PassAndTimeLimits) {
     cfg.limits.time_limit = 1e-9;  // expires during the first pass
     OptimizeReport rep = hill_climb(bvh, cfg);
     EXPECT_EQ(rep.passes, 1u);
-    EXPECT_EQ(rep.stop_reason, "time limit");
+    EXPECT_EQ(rep.stop_reason, StopReason::time_limit);
   }
 }
 
@@ -277,7 +277,7 @@ TEST(HillClimb, DegenerateInputs) {
   Bvh bvh = median_tree(one);
   OptimizeReport rep = hill_climb(bvh);
   EXPECT_EQ(rep.passes, 0u);
-  EXPECT_EQ(rep.stop_reason, "converged");
+  EXPECT_EQ(rep.stop_reason, StopReason::converged);
   // All boxes one point: zero root area, the cost is defined by the limit and stays.
   PrimitiveRefs points = make_references(std::vector<Box>(9, Box({1, 2, 3}, {1, 2, 3})));
   Bvh p = median_tree(points);

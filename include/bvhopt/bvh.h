@@ -63,9 +63,23 @@ struct Bvh {
   // Which child slot (0 or 1) n occupies in its parent.
   int child_slot(uint32_t n) const { return nodes[nodes[n].parent].left() == n ? 0 : 1; }
 
-  // Recomputes box and area of every inner node from `node` up to the root, each as the
-  // union of its children. Stops early once a box no longer changes.
-  void refit_upwards(uint32_t node);
+  // Sets inner node n's box (and area) to the union of its children's.
+  void refit_node(uint32_t n) {
+    BvhNode& nd = nodes[n];
+    nd.set_box(merge(nodes[nd.left()].box, nodes[nd.right()].box));
+  }
+  enum class RefitScope {
+    // Stop at the first box that does not change: in a tree whose every box is the union of
+    // its children, the boxes above it cannot change either.
+    until_unchanged,
+    // Every node up to the root, for trees where boxes above may be stale.
+    to_root,
+  };
+  // Refits every inner node from `node` (leaves are skipped) up to the root, each as the
+  // union of its children. `inner_area_sum`, if given, receives each node's change of area,
+  // added one at a time from the bottom (so a running sum stays exactly what it would be
+  // if the caller added them itself).
+  void refit_upwards(uint32_t node, RefitScope scope = RefitScope::until_unchanged, double* inner_area_sum = nullptr);
   // Recomputes every box bottom-up: leaves from their references, inner nodes from children.
   void refit(const PrimitiveRefs& refs);
 

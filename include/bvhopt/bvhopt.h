@@ -16,6 +16,8 @@
 #include "bvhopt/build.h"
 
 #include "bvhopt/optimize_report.h"
+#include "bvhopt/optimizer_config.h"
+#include "bvhopt/optimizer_method.h"
 #include "bvhopt/tree_rotations.h"
 #include "bvhopt/insertion_optimizer.h"
 

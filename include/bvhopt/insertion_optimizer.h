@@ -4,14 +4,15 @@
 #pragma once
 
 #include <cstdint>
-#include <functional>
 #include <optional>
 #include <string_view>
+#include <vector>
 
 #include "bvhopt/box.h"
 #include "bvhopt/bvh.h"
 #include "bvhopt/cost_model.h"
 #include "bvhopt/optimize_report.h"
+#include "bvhopt/optimizer_config.h"
 
 namespace bvhopt {
 
@@ -26,6 +27,8 @@ enum class InsertionMeasure {
 std::string_view measure_name(InsertionMeasure m);
 // "area", "sum", "min", "comb"; nullopt for anything else.
 std::optional<InsertionMeasure> parse_measure(std::string_view name);
+// Every measure, in the order above.
+std::vector<InsertionMeasure> insertion_measures();
 
 // How the passes are run.
 enum class InsertionForm {
@@ -52,9 +55,15 @@ enum class InsertionForm {
 std::string_view form_name(InsertionForm f);
 // "sequential", "parallel", "hybrid"; nullopt for anything else.
 std::optional<InsertionForm> parse_form(std::string_view name);
+// Every form, in the order above.
+std::vector<InsertionForm> insertion_forms();
 
-struct InsertionConfig {
-  CostModel cost;  // only scales the reported cost: the search minimizes c_T * sum SA(inner)
+// cost: only scales the reported cost, the search minimizes c_T * sum SA(inner). limits: hard
+// limits over all stages, which also bound the run when the cost oscillates; unlike the
+// rotations' configs, a cap of 1000 passes by default. seed: of the random selection passes.
+struct InsertionConfig : OptimizerConfig {
+  InsertionConfig() { limits.max_passes = 1000; }
+
   // Fraction of the inner nodes updated per pass (the paper's k = 1 %); at least one node.
   double batch = 0.01;
   InsertionMeasure measure = InsertionMeasure::area;
@@ -66,24 +75,14 @@ struct InsertionConfig {
   // fraction; without it the parallel form, which only ever lowers the cost, would count
   // endless tiny gains and never turn random or stop.
   double min_improvement = 1e-5;
-  // Hard limits over all stages; they also bound the run when the cost oscillates. The
-  // time limit is checked after every pass; 0 = none.
-  uint32_t max_passes = 1000;
-  double time_limit_seconds = 0.0;
-  // Every random choice (random selection passes) flows from this.
-  uint64_t seed = 1;
   InsertionForm form = InsertionForm::hybrid;
-  // Test hook: called after every complete move (sequential: both children reinserted;
-  // parallel: a subtree moved, or a move undone) with the tree and the tracked cost. Slows
-  // the optimizer down; leave empty.
-  std::function<void(const Bvh&, double tracked_cost)> after_move;
 };
 
 // Optimizes `bvh` in place. Works on a tree from any builder and with any leaf sizes: leaves
 // move as whole subtrees and are never split, so the leaf term of the cost stays fixed (the
 // references are not needed: leaf boxes are kept, inner boxes refitted from them). The tree
 // is compacted (depth-first numbering) before and after.
-OptimizeReport optimize_insertion(Bvh& bvh, const InsertionConfig& config = {}, const PassCallback& on_pass = {});
+OptimizeReport optimize_insertion(Bvh& bvh, const InsertionConfig& config = {});
 
 // The best place for a subtree with box `box` (Algorithm 1): the node X minimizing
 // SA(X u box) plus the growth of every box above X, with that total (surface area, not
@@ -101,8 +100,5 @@ ReinsertionCandidate find_reinsertion(const Bvh& bvh, const Box& box, uint32_t s
 // removal frees. Equals find_reinsertion on the tree after an actual removal.
 ReinsertionCandidate find_reinsertion_after_removal(const Bvh& bvh, const Box& box, uint32_t n,
                                                     double* freed_area = nullptr);
-// The same by trying every node, for tests: the same minimum, computed the same way.
-ReinsertionCandidate find_reinsertion_brute_force(const Bvh& bvh, const Box& box, uint32_t skip = kInvalidNode,
-                                                  uint32_t pass_through = kInvalidNode);
 
 }  // namespace bvhopt

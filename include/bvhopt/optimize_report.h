@@ -3,7 +3,7 @@
 
 #include <cstdint>
 #include <functional>
-#include <string>
+#include <string_view>
 #include <vector>
 
 namespace bvhopt {
@@ -18,13 +18,25 @@ struct PassRecord {
   double seconds = 0.0;      // elapsed since the optimizer started
 };
 
+// Why an optimizer stopped.
+enum class StopReason : uint8_t {
+  converged,            // the method's own stopping rule
+  pass_limit,           // OptimizeLimits::max_passes
+  time_limit,           // OptimizeLimits::time_limit
+  empty_tree,           // no tree to optimize
+  nothing_to_optimize,  // a tree too small (or of zero area) for any move
+};
+// "converged", "pass limit", "time limit", "empty tree", "nothing to optimize": the words the
+// command line's --json "stop_reason" and the experiment's files carry.
+std::string_view stop_reason_name(StopReason r);
+
 struct OptimizeReport {
   double initial_cost = 0.0;
   double final_cost = 0.0;
   uint32_t passes = 0;
   uint64_t moves = 0;
   double seconds = 0.0;
-  std::string stop_reason;  // "converged", "pass limit", "time limit", ...
+  StopReason stop_reason = StopReason::converged;
   std::vector<PassRecord> trace;
 };
 

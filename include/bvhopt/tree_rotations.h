@@ -16,6 +16,7 @@
 #include "bvhopt/bvh.h"
 #include "bvhopt/cost_model.h"
 #include "bvhopt/optimize_report.h"
+#include "bvhopt/optimizer_config.h"
 
 namespace bvhopt {
 
@@ -43,21 +44,13 @@ double rotation_cost_delta(const Bvh& bvh, uint32_t node, Rotation r, const Cost
 // whose children changed. Node indices are kept; no other node changes. The move must apply.
 void apply_rotation(Bvh& bvh, uint32_t node, Rotation r);
 
-// Settings both optimizers share. Limits of 0 mean no limit.
-struct RotationLimits {
-  uint32_t max_passes = 0;    // stop after this many passes over the tree
-  double time_limit = 0.0;    // seconds; checked after every pass
-};
-
-struct HillClimbConfig {
-  CostModel cost;             // only c_T matters for the moves; both for the reported cost
-  RotationLimits limits;      // default: run until a pass finds no improving move
-  PassCallback on_pass;       // called after every pass (may be empty)
-};
+// cost: only c_T matters for the moves, both for the reported cost. limits: by default, run
+// until a pass finds no improving move. seed: unused (hill climbing makes no random choice).
+struct HillClimbConfig : OptimizerConfig {};
 
 // Hill climbing (section 3): passes in post-order; at each inner node the move that lowers
 // its cost most, if any, is applied. Stops when a pass applies no move (stop_reason
-// "converged"), or at a limit. The cost never rises. Parallel over independent subtrees;
+// StopReason::converged), or at a limit. The cost never rises. Parallel over independent subtrees;
 // the tree does not depend on the thread count. Changes `bvh` in place (indices kept, so
 // leaves and ref_indices are untouched); the tree stays valid.
 OptimizeReport hill_climb(Bvh& bvh, const HillClimbConfig& config = {});
@@ -76,9 +69,9 @@ OptimizeReport hill_climb(Bvh& bvh, const HillClimbConfig& config = {});
 // scale 1 would mean, only undoes the hill climbing: h = 3 already ends where hill
 // climbing did on Sponza.) The paper prints the acceptance test as P(dE, T) < xi; a move
 // must be accepted with probability P, so we accept when xi < P.
-struct AnnealConfig {
-  CostModel cost;             // for the reported cost; the moves depend on areas only
-  uint64_t seed = 1;          // every random choice flows from it
+// cost: for the reported cost only, the moves depend on areas alone. limits: a pass or time
+// limit may cut the schedule or the quench short.
+struct AnnealConfig : OptimizerConfig {
   // Schedule T(i) = max(0, -sin(2 pi i / period)) * (schedule_passes - i) * h / schedule_passes
   // for passes i = 0 .. schedule_passes - 1, then T = 0 (the quench) until a pass applies
   // no move. Defaults N = 1250 and f = 50 as in the paper.
@@ -93,8 +86,6 @@ struct AnnealConfig {
   // rather than the last one. Only hot passes can raise the cost, so the best tree is copied
   // just before a hot pass, and only if it is the current one.
   bool keep_best = true;
-  RotationLimits limits;      // a pass or time limit may cut the schedule or the quench short
-  PassCallback on_pass;
 };
 
 // Kensler's schedule above; 0 for i >= schedule_passes.

@@ -339,7 +339,7 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
     trees[key] = tree_det(tree);
     trees[key]["passes"] = rep.passes;
     trees[key]["moves"] = rep.moves;
-    trees[key]["stop_reason"] = rep.stop_reason;
+    trees[key]["stop_reason"] = std::string(stop_reason_name(rep.stop_reason));
     det["traces"][key] = trace_costs(rep);
     timing["traces"][key] = trace_seconds(rep);
     ttimes[key]["optimize_seconds"] = secs;
@@ -349,7 +349,7 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
   {
     Bvh tree = sah;
     HillClimbConfig hc_cfg;
-    hc_cfg.on_pass = [&](const PassRecord& p) { run.step("hill climbing", 0.15, p.pass); };
+    hc_cfg.limits.on_pass = [&](const PassRecord& p) { run.step("hill climbing", 0.15, p.pass); };
     t0 = Clock::now();
     OptimizeReport rep = hill_climb(tree, hc_cfg);
     record("hill", tree, rep, seconds_since(t0));
@@ -378,7 +378,7 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
                               {"scaled_by_budget", scaled}, {"paper_passes", 1250}, {"paper_period", 50},
                               {"estimated_full_seconds", full_estimate}};
     const uint32_t total = ac.schedule_passes;
-    ac.on_pass = [&](const PassRecord& p) {
+    ac.limits.on_pass = [&](const PassRecord& p) {
       run.step("annealing", 0.2 + 0.5 * std::min(1.0, double(p.pass) / total), p.pass);
     };
     Bvh tree = sah;
@@ -400,8 +400,8 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
     ic.seed = cfg.seed;
     const std::string step_label = label;
     t0 = Clock::now();
-    OptimizeReport rep =
-        optimize_insertion(tree, ic, [&](const PassRecord& p) { run.step(step_label, 0.75, p.pass); });
+    ic.limits.on_pass = [&](const PassRecord& p) { run.step(step_label, 0.75, p.pass); };
+    OptimizeReport rep = optimize_insertion(tree, ic);
     record(key, tree, rep, seconds_since(t0));
     optimized.emplace_back(key, std::move(tree));
   }

@@ -5,12 +5,14 @@
 
 #include <algorithm>
 #include <bit>
-#include <functional>
-#include <chrono>
 #include <cmath>
-#include <limits>
+#include <functional>
+#include <utility>
 #include <vector>
 
+#include "bvhopt/random_stream.h"
+#include "bvhopt/testing/insertion_hooks.h"
+#include "optimize/pass_driver.h"
 #include "optimize/reinsertion_search.h"
 
 namespace bvhopt {
@@ -25,8 +27,12 @@ std::string_view measure_name(InsertionMeasure m) {
   return "area";
 }
 
+std::vector<InsertionMeasure> insertion_measures() {
+  return {InsertionMeasure::area, InsertionMeasure::sum, InsertionMeasure::min, InsertionMeasure::comb};
+}
+
 std::optional<InsertionMeasure> parse_measure(std::string_view name) {
-  for (InsertionMeasure m : {InsertionMeasure::area, InsertionMeasure::sum, InsertionMeasure::min, InsertionMeasure::comb})
+  for (InsertionMeasure m : insertion_measures())
     if (measure_name(m) == name) return m;
   return std::nullopt;
 }
@@ -40,8 +46,12 @@ std::string_view form_name(InsertionForm f) {
   return "hybrid";
 }
 
+std::vector<InsertionForm> insertion_forms() {
+  return {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid};
+}
+
 std::optional<InsertionForm> parse_form(std::string_view name) {
-  for (InsertionForm f : {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid})
+  for (InsertionForm f : insertion_forms())
     if (form_name(f) == name) return f;
   return std::nullopt;
 }
@@ -57,43 +67,8 @@ ReinsertionCandidate find_reinsertion_after_removal(const Bvh& bvh, const Box& b
   return detail::search_reinsertion_after_removal(bvh, box, n, heap, path, freed_area);
 }
 
-ReinsertionCandidate find_reinsertion_brute_force(const Bvh& bvh, const Box& box, uint32_t skip,
-                                                  uint32_t pass_through) {
-  ReinsertionCandidate best{kInvalidNode, std::numeric_limits<double>::infinity()};
-  if (bvh.empty()) return best;
-  std::vector<detail::SearchEntry> stack{{0.0, bvh.root}};
-  while (!stack.empty()) {
-    const detail::SearchEntry e = stack.back();
-    stack.pop_back();
-    if (e.node == skip) continue;
-    const BvhNode& x = bvh[e.node];
-    const double direct = merge(x.box, box).area();
-    const double total = e.induced + direct;
-    if (total < best.cost && e.node != pass_through) best = {e.node, total};
-    if (x.is_leaf()) continue;
-    const double child_induced = e.induced + (direct - static_cast<double>(x.area));
-    stack.push_back({child_induced, x.right()});
-    stack.push_back({child_induced, x.left()});
-  }
-  return best;
-}
-
 namespace {
 
-// splitmix64: a tiny generator whose sequence is the same on every platform (the standard
-// distributions are not).
-struct Random {
-  uint64_t state;
-  uint64_t next() {
-    uint64_t z = (state += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-  }
-  uint32_t below(uint32_t n) { return static_cast<uint32_t>((next() >> 32) * n >> 32); }
-};
-
-// One planned move of a parallel pass: node N out, its children to x_first and x_second.
 // One planned move of a parallel pass: subtree `moved` leaves its parent (which is freed,
 // the sibling taking its place) and goes above `target`, with the exact change of the sum
 // of inner areas in the tree as the plan saw it.
@@ -103,9 +78,11 @@ struct Plan {
   double delta = 0.0;
 };
 
+// One stage of the optimizer (one form) over the tree, and its passes for the pass driver.
 class InsertionOptimizer {
  public:
-  InsertionOptimizer(Bvh& bvh, const InsertionConfig& config) : bvh_(bvh), config_(config) {
+  InsertionOptimizer(Bvh& bvh, const InsertionConfig& config, bool parallel, const testing::AfterMove* after_move)
+      : bvh_(bvh), config_(config), parallel_(parallel), after_move_(after_move) {
     for (const BvhNode& n : bvh_.nodes) {
       if (n.is_leaf())
         leaf_term_ += leaf_cost(n.area, n.ref_count());
@@ -119,6 +96,44 @@ class InsertionOptimizer {
 
   bool can_optimize() const { return root_area_ > 0.0 && bvh_.nodes.size() >= 5; }
 
+  // The sequential form can raise the cost (both children are out at once) and oscillates
+  // near the end, so it keeps the best tree it has seen. The parallel form never raises it.
+  bool keep_best_before(uint32_t /*pass*/) const { return !parallel_; }
+  struct Snapshot {
+    std::vector<BvhNode> nodes;
+    uint32_t root;
+    double inner_area;
+  };
+  Snapshot snapshot() const { return {bvh_.nodes, bvh_.root, inner_area_}; }
+  void restore(Snapshot s) {
+    bvh_.nodes = std::move(s.nodes);
+    bvh_.root = s.root;
+    inner_area_ = s.inner_area;
+  }
+
+  detail::PassResult run_pass(uint32_t pass, double stage_best) {
+    // Once the measure has stalled, selection stays random (section 2.5): going back to the
+    // measure after a good random pass would only retry the nodes that just stalled.
+    random_ = random_ || without_improvement_ >= config_.random_after;
+    select(pass + 1, random_, candidates_);
+    uint64_t moves = 0;
+    if (parallel_) {
+      moves = pass_parallel(candidates_);
+    } else {
+      for (uint32_t n : candidates_) moves += update_sequential(n);
+    }
+    const double c = cost();
+    // A relative margin, so that rounding noise in an oscillating tail or the endless tiny
+    // gains of the parallel form never count as progress.
+    if (c < stage_best * (1.0 - config_.min_improvement))
+      without_improvement_ = 0;
+    else
+      ++without_improvement_;
+    return {c, moves, 0.0, without_improvement_ >= config_.stop_after};
+  }
+
+ private:
+
   // Candidates of one pass: the k inner non-root nodes with the largest measure, largest
   // first, or k random ones.
   void select(uint32_t pass, bool random, std::vector<uint32_t>& out) {
@@ -131,7 +146,7 @@ class InsertionOptimizer {
     if (inner_.empty()) return;
     const size_t k = std::clamp<size_t>(static_cast<size_t>(std::ceil(config_.batch * inner_.size())), 1, inner_.size());
     if (random) {
-      Random rng{config_.seed * 0x9e3779b97f4a7c15ull + pass};
+      RandomStream rng{config_.seed * kGoldenGamma + pass};
       for (size_t i = 0; i < k; ++i) out.push_back(inner_[rng.below(static_cast<uint32_t>(inner_.size()))]);
       return;
     }
@@ -165,7 +180,7 @@ class InsertionOptimizer {
     insert(a, ca.node, n);
     ReinsertionCandidate cb = detail::search_reinsertion(bvh_, bvh_[b].box, kInvalidNode, kInvalidNode, heap_);
     insert(b, cb.node, p);
-    if (config_.after_move) config_.after_move(bvh_, cost());
+    notify_move();
     return 1;
   }
 
@@ -186,7 +201,10 @@ class InsertionOptimizer {
     return moves;
   }
 
- private:
+  void notify_move() const {
+    if (after_move_) (*after_move_)(bvh_, cost());
+  }
+
   double measure(uint32_t i) const {
     const BvhNode& n = bvh_[i];
     const double a = n.area;
@@ -209,19 +227,8 @@ class InsertionOptimizer {
     return {a, b};
   }
 
-  // Refits from `n` up, adding each area change to the tracked sum. Stops at the first box
-  // that does not change: the boxes above it cannot change either.
-  void refit_up(uint32_t n) {
-    while (n != kInvalidNode) {
-      BvhNode& nd = bvh_[n];
-      const Box b = merge(bvh_[nd.left()].box, bvh_[nd.right()].box);
-      if (b == nd.box) return;
-      const float old_area = nd.area;
-      nd.set_box(b);
-      inner_area_ += static_cast<double>(nd.area) - old_area;
-      n = nd.parent;
-    }
-  }
+  // Refits from `n` up, adding each area change to the tracked sum.
+  void refit_up(uint32_t n) { bvh_.refit_upwards(n, Bvh::RefitScope::until_unchanged, &inner_area_); }
 
   // Figure 3: N and its parent P leave the tree, N's sibling takes P's place.
   void remove(uint32_t n) { detach(n, bvh_[n].area); }
@@ -322,26 +329,24 @@ class InsertionOptimizer {
         if (involved[i] != kInvalidNode) bvh_[involved[i]] = saved[i];
       bvh_.root = saved_root;
       for (uint32_t v : involved)
-        if (v != kInvalidNode) refit_to_root(v);
+        if (v != kInvalidNode) bvh_.refit_upwards(v, Bvh::RefitScope::to_root);
       inner_area_ = saved_area;
-      if (config_.after_move) config_.after_move(bvh_, cost());
+      notify_move();
       return 0;
     }
     for (uint32_t v : involved)
       if (v != kInvalidNode) touched_[v] = stamp_;
-    if (config_.after_move) config_.after_move(bvh_, cost());
+    notify_move();
     return 1;
-  }
-
-  void refit_to_root(uint32_t n) {
-    for (; n != kInvalidNode; n = bvh_[n].parent) {
-      BvhNode& nd = bvh_[n];
-      if (!nd.is_leaf()) nd.set_box(merge(bvh_[nd.left()].box, bvh_[nd.right()].box));
-    }
   }
 
   Bvh& bvh_;
   const InsertionConfig& config_;
+  const bool parallel_;
+  const testing::AfterMove* after_move_;  // may be null
+  bool random_ = false;                   // selection has turned random for the rest of the stage
+  uint32_t without_improvement_ = 0;      // passes since the last one that counted as progress
+  std::vector<uint32_t> candidates_;
   double inner_area_ = 0.0;
   double leaf_term_ = 0.0;
   double root_area_ = 0.0;
@@ -355,124 +360,53 @@ class InsertionOptimizer {
   double leaf_cost(float area, uint32_t count) const { return config_.cost.intersection * area * count; }
 };
 
-}  // namespace
+// The stages of each form: false for a sequential stage, true for a parallel one.
+std::vector<bool> stages_of(InsertionForm form) {
+  switch (form) {
+    case InsertionForm::sequential: return {false};
+    case InsertionForm::parallel: return {true};
+    case InsertionForm::hybrid: return {false, true};
+  }
+  return {false, true};
+}
 
-OptimizeReport optimize_insertion(Bvh& bvh, const InsertionConfig& config, const PassCallback& on_pass) {
-  using Clock = std::chrono::steady_clock;
-  const Clock::time_point start = Clock::now();
-  auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
-
-  OptimizeReport report;
+OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const testing::AfterMove* after_move) {
+  detail::PassDriver driver(config.limits);
   if (bvh.empty()) {
-    report.stop_reason = "empty tree";
-    return report;
+    driver.stop(StopReason::empty_tree);
+    return driver.finish();
   }
   // Numbering every reachable node densely lets a pass scan the node array for inner
   // nodes; the refit makes every box exactly the union of its children, which undoing a
   // parallel move relies on.
   bvh.renumber_depth_first();
-  for (uint32_t n : bvh.post_order()) {
-    BvhNode& nd = bvh[n];
-    if (!nd.is_leaf()) nd.set_box(merge(bvh[nd.left()].box, bvh[nd.right()].box));
-  }
-
+  for (uint32_t n : bvh.post_order())
+    if (!bvh[n].is_leaf()) bvh.refit_node(n);
   {
-    InsertionOptimizer probe(bvh, config);
-    report.initial_cost = report.final_cost = probe.cost();
+    InsertionOptimizer probe(bvh, config, false, after_move);
+    driver.set_initial_cost(probe.cost());
     if (!probe.can_optimize()) {
-      report.stop_reason = "nothing to optimize";
-      report.seconds = elapsed();
-      return report;
+      driver.stop(StopReason::nothing_to_optimize);
+      return driver.finish();
     }
   }
-
-  std::vector<bool> stages;  // true = parallel form
-  switch (config.form) {
-    case InsertionForm::sequential: stages = {false}; break;
-    case InsertionForm::parallel: stages = {true}; break;
-    case InsertionForm::hybrid: stages = {false, true}; break;
-  }
-  double best = report.initial_cost;
-  uint32_t pass = 0;
-  std::vector<uint32_t> candidates;
-  report.stop_reason = "pass limit";
-  bool out_of_budget = false;
-  for (size_t stage = 0; stage < stages.size() && !out_of_budget; ++stage) {
-    const bool parallel = stages[stage];
+  for (bool parallel : stages_of(config.form)) {
     // Each stage starts afresh from the tree the last one left (its tracked sums included).
-    InsertionOptimizer opt(bvh, config);
-    uint32_t without_improvement = 0;
-    bool random = false;
-    // The sequential form can raise the cost (both children are out at once) and oscillates
-    // near the end, so it keeps the best tree it has seen. The parallel form never raises it.
-    const bool keep_best = !parallel;
-    double stage_best = opt.cost();
-    std::vector<BvhNode> best_nodes;
-    if (keep_best) best_nodes = bvh.nodes;
-    uint32_t best_root = bvh.root;
-    bool converged = false;
-    while (true) {
-      if (pass >= config.max_passes) {
-        report.stop_reason = "pass limit";
-        out_of_budget = true;
-        break;
-      }
-      ++pass;
-      // Once the measure has stalled, selection stays random (section 2.5): going back to
-      // the measure after a good random pass would only retry the nodes that just stalled.
-      random = random || without_improvement >= config.random_after;
-      opt.select(pass, random, candidates);
-      uint64_t moves = 0;
-      if (parallel) {
-        moves = opt.pass_parallel(candidates);
-      } else {
-        for (uint32_t n : candidates) moves += opt.update_sequential(n);
-      }
-      PassRecord rec;
-      rec.pass = pass;
-      rec.cost = opt.cost();
-      // A relative margin, so that rounding noise in an oscillating tail or the endless tiny
-      // gains of the parallel form never count as progress.
-      if (rec.cost < stage_best * (1.0 - config.min_improvement))
-        without_improvement = 0;
-      else
-        ++without_improvement;
-      if (rec.cost < stage_best) {
-        stage_best = rec.cost;
-        if (keep_best) {
-          best_nodes = bvh.nodes;
-          best_root = bvh.root;
-        }
-      }
-      best = std::min(best, rec.cost);
-      rec.best_cost = best;
-      rec.moves = moves;
-      rec.seconds = elapsed();
-      report.trace.push_back(rec);
-      report.passes = pass;
-      report.moves += moves;
-      if (on_pass) on_pass(rec);
-      if (without_improvement >= config.stop_after) {
-        converged = true;
-        break;
-      }
-      if (config.time_limit_seconds > 0.0 && rec.seconds >= config.time_limit_seconds) {
-        report.stop_reason = "time limit";
-        out_of_budget = true;
-        break;
-      }
-    }
-    report.final_cost = opt.cost();
-    if (keep_best && stage_best < report.final_cost) {
-      bvh.nodes = std::move(best_nodes);
-      bvh.root = best_root;
-      report.final_cost = stage_best;
-    }
-    if (converged) report.stop_reason = "converged";
+    InsertionOptimizer stage(bvh, config, parallel, after_move);
+    driver.run(stage);
+    if (driver.stop_reason() != StopReason::converged) break;
   }
   bvh.renumber_depth_first();
-  report.seconds = elapsed();
-  return report;
+  return driver.finish();
+}
+
+}  // namespace
+
+OptimizeReport optimize_insertion(Bvh& bvh, const InsertionConfig& config) { return run_insertion(bvh, config, nullptr); }
+
+OptimizeReport testing::optimize_insertion_observed(Bvh& bvh, const InsertionConfig& config,
+                                                    const AfterMove& after_move) {
+  return run_insertion(bvh, config, &after_move);
 }
 
 }  // namespace bvhopt

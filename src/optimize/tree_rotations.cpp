@@ -1,11 +1,11 @@
 #include "bvhopt/tree_rotations.h"
 
-#include <chrono>
+#include <algorithm>
 #include <cmath>
 #include <numbers>
-#include <optional>
 
 #include "bvhopt/cost.h"
+#include "optimize/pass_driver.h"
 #include "optimize/tree_rotations_engine.h"
 
 namespace bvhopt {
@@ -109,14 +109,13 @@ void apply_rotation(Bvh& bvh, uint32_t node, Rotation r) {
     bvh[y].parent = a;
     bvh[x].parent = b;
   };
-  auto refit = [&](uint32_t i) { bvh[i].set_box(merge(bvh[bvh[i].left()].box, bvh[bvh[i].right()].box)); };
   switch (r) {
-    case Rotation::left_with_right_left: exchange(node, 0, rt, 0); refit(rt); break;
-    case Rotation::left_with_right_right: exchange(node, 0, rt, 1); refit(rt); break;
-    case Rotation::right_with_left_left: exchange(node, 1, l, 0); refit(l); break;
-    case Rotation::right_with_left_right: exchange(node, 1, l, 1); refit(l); break;
-    case Rotation::left_left_with_right_left: exchange(l, 0, rt, 0); refit(l); refit(rt); break;
-    case Rotation::left_left_with_right_right: exchange(l, 0, rt, 1); refit(l); refit(rt); break;
+    case Rotation::left_with_right_left: exchange(node, 0, rt, 0); bvh.refit_node(rt); break;
+    case Rotation::left_with_right_right: exchange(node, 0, rt, 1); bvh.refit_node(rt); break;
+    case Rotation::right_with_left_left: exchange(node, 1, l, 0); bvh.refit_node(l); break;
+    case Rotation::right_with_left_right: exchange(node, 1, l, 1); bvh.refit_node(l); break;
+    case Rotation::left_left_with_right_left: exchange(l, 0, rt, 0); bvh.refit_node(l); bvh.refit_node(rt); break;
+    case Rotation::left_left_with_right_right: exchange(l, 0, rt, 1); bvh.refit_node(l); bvh.refit_node(rt); break;
   }
 }
 
@@ -142,81 +141,59 @@ struct Schedule {
   bool keep_best = false;
 };
 
-OptimizeReport run(Bvh& bvh, const CostModel& cost, const RotationLimits& limits, const PassCallback& on_pass,
-                   const Schedule& schedule) {
-  const auto start = std::chrono::steady_clock::now();
-  auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
-  OptimizeReport report;
-  report.initial_cost = report.final_cost = sah_cost(bvh, cost);
-  if (bvh.empty() || bvh[bvh.root].is_leaf() || !(bvh[bvh.root].area > 0.0f)) {
-    // Nothing to rotate, or a tree of zero area where every move changes nothing.
-    report.stop_reason = "converged";
-    report.seconds = elapsed();
-    return report;
-  }
-  detail::RotationEngine engine(bvh, cost);
-  report.initial_cost = engine.tree_cost();
-  double best = report.initial_cost;
-  bool current_is_best = true;
-  std::optional<detail::RotationEngine::Snapshot> best_tree;  // valid only when it holds `best`
+// The passes of either optimizer over the engine's working copy, for the pass driver.
+class RotationPasses {
+ public:
+  RotationPasses(detail::RotationEngine& engine, const Schedule& schedule) : engine_(engine), schedule_(schedule) {}
 
-  bool settled = false;  // the last pass was cold and applied no move
-  for (uint32_t pass = 0;; ++pass) {
-    const double t = annealing_temperature(pass, schedule.passes, schedule.period, schedule.h);
-    // Only a hot pass can raise the cost, so the best tree is saved just before one.
-    if (t > 0.0 && schedule.keep_best && current_is_best && !best_tree) best_tree = engine.snapshot();
+  double cost() const { return engine_.tree_cost(); }
+  // Only a hot pass can raise the cost.
+  bool keep_best_before(uint32_t pass) const { return schedule_.keep_best && temperature(pass) > 0.0; }
+  detail::RotationEngine::Snapshot snapshot() const { return engine_.snapshot(); }
+  void restore(const detail::RotationEngine::Snapshot& s) { engine_.restore(s); }
+
+  detail::PassResult run_pass(uint32_t pass, double /*stage_best*/) {
+    const double t = temperature(pass);
     // A cold pass that moved nothing left the tree as it was, and a cold pass uses no random
     // numbers: the next cold pass would find nothing either, so it is skipped (it still
     // counts and is reported). This saves most of the cold half of every schedule period.
     uint64_t moves = 0;
-    if (!(t == 0.0 && settled)) {
-      if (pass > 0 && pass % kRelayoutPeriod == 0) engine.relayout();
-      moves = engine.run_pass(t, schedule.energy_scale, schedule.seed, pass);
+    if (!(t == 0.0 && settled_)) {
+      if (pass > 0 && pass % kRelayoutPeriod == 0) engine_.relayout();
+      moves = engine_.run_pass(t, schedule_.energy_scale, schedule_.seed, pass);
     }
-    settled = t == 0.0 && moves == 0;
-    const double c = engine.tree_cost();
-    if (c < best) {
-      best = c;
-      best_tree.reset();
-    }
-    current_is_best = c <= best;
-
-    PassRecord rec;
-    rec.pass = pass + 1;
-    rec.cost = c;
-    rec.best_cost = best;
-    rec.temperature = t;
-    rec.moves = moves;
-    rec.seconds = elapsed();
-    report.trace.push_back(rec);
-    report.passes = pass + 1;
-    report.moves += moves;
-    if (on_pass) on_pass(rec);
-
-    if (pass + 1 >= schedule.passes && moves == 0 && t == 0.0) {
-      report.stop_reason = "converged";
-      break;
-    }
-    if (limits.max_passes != 0 && report.passes >= limits.max_passes) {
-      report.stop_reason = "pass limit";
-      break;
-    }
-    if (limits.time_limit > 0.0 && rec.seconds >= limits.time_limit) {
-      report.stop_reason = "time limit";
-      break;
-    }
+    settled_ = t == 0.0 && moves == 0;
+    const bool converged = pass + 1 >= schedule_.passes && settled_;
+    return {engine_.tree_cost(), moves, t, converged};
   }
-  if (schedule.keep_best && !current_is_best && best_tree) engine.restore(*best_tree);
+
+ private:
+  double temperature(uint32_t pass) const {
+    return annealing_temperature(pass, schedule_.passes, schedule_.period, schedule_.h);
+  }
+
+  detail::RotationEngine& engine_;
+  const Schedule& schedule_;
+  bool settled_ = false;  // the last pass was cold and applied no move
+};
+
+OptimizeReport run(Bvh& bvh, const OptimizerConfig& config, const Schedule& schedule) {
+  detail::PassDriver driver(config.limits);
+  driver.set_initial_cost(sah_cost(bvh, config.cost));
+  // Nothing to rotate, or a tree of zero area where every move changes nothing.
+  if (bvh.empty() || bvh[bvh.root].is_leaf() || !(bvh[bvh.root].area > 0.0f)) return driver.finish();
+  detail::RotationEngine engine(bvh, config.cost);
+  driver.set_initial_cost(engine.tree_cost());
+  RotationPasses passes(engine, schedule);
+  driver.run(passes);
   engine.write_to(bvh);
-  report.final_cost = engine.tree_cost();
-  report.seconds = elapsed();
-  return report;
+  return driver.finish();
 }
 
 }  // namespace
 
 OptimizeReport hill_climb(Bvh& bvh, const HillClimbConfig& config) {
-  return run(bvh, config.cost, config.limits, config.on_pass, Schedule{});
+  return run(bvh, config, Schedule{});
 }
 
 OptimizeReport anneal(Bvh& bvh, const AnnealConfig& config) {
@@ -227,7 +204,7 @@ OptimizeReport anneal(Bvh& bvh, const AnnealConfig& config) {
   s.energy_scale = config.energy_scale;
   s.seed = config.seed;
   s.keep_best = config.keep_best;
-  return run(bvh, config.cost, config.limits, config.on_pass, s);
+  return run(bvh, config, s);
 }
 
 }  // namespace bvhopt

@@ -8,26 +8,15 @@
 #include <limits>
 #include <utility>
 
+#include "bvhopt/random_stream.h"
+
 namespace bvhopt::detail {
 namespace {
 
-inline uint64_t mix64(uint64_t z) {
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
-
 // The stream of one task: its own state, so no task's draws depend on another's.
-inline uint64_t stream_state(uint64_t seed, uint32_t pass, uint64_t position) {
-  return mix64(mix64(seed ^ 0x6a09e667f3bcc909ull) + 0x9e3779b97f4a7c15ull * (pass + 1ull) +
-               mix64(position + 0x3c6ef372fe94f82bull));
-}
-
-// splitmix64: one add and a finalizer per draw; a uniform double in (0, 1) (the centre of
-// one of 2^53 equal cells, so never 0 and never 1).
-inline double next_open_uniform(uint64_t& state) {
-  state += 0x9e3779b97f4a7c15ull;
-  return (static_cast<double>(mix64(state) >> 11) + 0.5) * 0x1.0p-53;
+inline RandomStream task_stream(uint64_t seed, uint32_t pass, uint64_t position) {
+  return {mix64(mix64(seed ^ 0x6a09e667f3bcc909ull) + kGoldenGamma * (pass + 1ull) +
+                mix64(position + 0x3c6ef372fe94f82bull))};
 }
 
 constexpr int kMoves = 6;
@@ -228,7 +217,7 @@ void RotationEngine::apply(uint32_t s, int m) {
 // drawn per applicable candidate (Kensler draws only when d >= best; the acceptance
 // probabilities are the same).
 template <bool kAnneal>
-inline bool RotationEngine::visit(uint32_t s, double t_over_energy, uint64_t& rng_state) {
+inline bool RotationEngine::visit(uint32_t s, double t_over_energy, RandomStream& rng) {
   const RotNode& nd = node(s);
   const uint32_t c = nd.first;
   const RotPair& kids = pairs_[c >> 1];
@@ -270,7 +259,7 @@ inline bool RotationEngine::visit(uint32_t s, double t_over_energy, uint64_t& rn
       // The area change that an exponential variate's worth of energy buys at this node.
       const double unit = t_over_energy * static_cast<double>(an);
       double slack[kMoves];
-      for (int m = from; m < to; ++m) slack[m] = -std::log(next_open_uniform(rng_state)) * unit;
+      for (int m = from; m < to; ++m) slack[m] = -std::log(rng.open_uniform()) * unit;
       for (int m = from; m < to; ++m) {
         if (d[m] - slack[m] < best) {
           best = d[m];
@@ -298,7 +287,7 @@ inline bool RotationEngine::visit(uint32_t s, double t_over_energy, uint64_t& rn
 // most cut_size_ leaves are not entered (their piece has been walked already). The high bit
 // of a stack entry marks a node whose children are already on the stack.
 template <bool kAnneal, bool kStopAtPieces>
-uint64_t RotationEngine::walk(uint32_t start, double t_over_energy, uint64_t rng_state, std::vector<uint32_t>& stack) {
+uint64_t RotationEngine::walk(uint32_t start, double t_over_energy, RandomStream rng, std::vector<uint32_t>& stack) {
   constexpr uint32_t kExpanded = 0x80000000u;
   uint64_t moves = 0;
   stack.clear();
@@ -307,7 +296,7 @@ uint64_t RotationEngine::walk(uint32_t start, double t_over_energy, uint64_t rng
     const uint32_t e = stack.back();
     if (e & kExpanded) {
       stack.pop_back();
-      moves += visit<kAnneal>(e & ~kExpanded, t_over_energy, rng_state);
+      moves += visit<kAnneal>(e & ~kExpanded, t_over_energy, rng);
       continue;
     }
     stack.back() = e | kExpanded;
@@ -354,14 +343,14 @@ uint64_t RotationEngine::run_pass(double temperature, double energy_scale, uint6
     std::vector<uint32_t> stack;
     stack.reserve(128);
     for (size_t k = range.begin(); k != range.end(); ++k) {
-      uint64_t rng = stream_state(seed, pass, k);
+      const RandomStream rng = task_stream(seed, pass, k);
       moves[k] = anneal ? walk<true, false>(pieces[k], t_over_energy, rng, stack)
                         : walk<false, false>(pieces[k], 0.0, rng, stack);
     }
   });
   if (split) {
     std::vector<uint32_t> stack;
-    uint64_t rng = stream_state(seed, pass, 0xffffffffull);
+    const RandomStream rng = task_stream(seed, pass, 0xffffffffull);
     moves.back() = anneal ? walk<true, true>(0, t_over_energy, rng, stack) : walk<false, true>(0, 0.0, rng, stack);
   }
   uint64_t total = 0;

@@ -18,6 +18,7 @@
 #include "bvhopt/box.h"
 #include "bvhopt/bvh.h"
 #include "bvhopt/cost_model.h"
+#include "bvhopt/random_stream.h"
 
 namespace bvhopt::detail {
 
@@ -89,9 +90,9 @@ class RotationEngine {
   void update_inner(uint32_t s);
   void exchange(uint32_t a, uint32_t b);
   template <bool kAnneal>
-  bool visit(uint32_t s, double t_over_energy, uint64_t& rng_state);
+  bool visit(uint32_t s, double t_over_energy, RandomStream& rng);
   template <bool kAnneal, bool kStopAtPieces>
-  uint64_t walk(uint32_t start, double t_over_energy, uint64_t rng_state, std::vector<uint32_t>& stack);
+  uint64_t walk(uint32_t start, double t_over_energy, RandomStream rng, std::vector<uint32_t>& stack);
 
   std::vector<RotPair> pairs_;
   std::vector<double> cost_;      // subtree cost, not normalized

@@ -17,6 +17,7 @@
 
 #include "bvhopt/error.h"
 #include "bvhopt/atomic_file.h"
+#include "bvhopt/random_stream.h"
 
 namespace bvhopt {
 namespace {
@@ -25,19 +26,12 @@ static_assert(std::endian::native == std::endian::little, "ray files are little-
 
 // splitmix64: one independent stream per (seed, pixel), so generation in parallel blocks
 // gives the same rays as a serial loop.
-struct Rng {
-  uint64_t state;
-  Rng(uint64_t seed, uint64_t stream) : state(seed * 0x9E3779B97F4A7C15ull ^ (stream + 0x632BE59BD9B4E019ull)) {
+struct Rng : RandomStream {
+  Rng(uint64_t seed, uint64_t stream) : RandomStream{seed * kGoldenGamma ^ (stream + 0x632BE59BD9B4E019ull)} {
     next();
     next();
   }
-  uint64_t next() {
-    uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-  }
-  float uniform() { return static_cast<float>(next() >> 40) * 0x1p-24f; }  // [0, 1)
+  float uniform() { return uniform_float(); }  // [0, 1)
 };
 
 Box mesh_bounds(const Mesh& mesh) {

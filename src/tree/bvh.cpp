@@ -4,26 +4,27 @@
 
 namespace bvhopt {
 
-void Bvh::refit_upwards(uint32_t node) {
+void Bvh::refit_upwards(uint32_t node, RefitScope scope, double* inner_area_sum) {
   for (uint32_t n = node; n != kInvalidNode; n = nodes[n].parent) {
     BvhNode& nd = nodes[n];
     if (nd.is_leaf()) continue;
-    Box b = merge(nodes[nd.left()].box, nodes[nd.right()].box);
-    // Above an unchanged box nothing changes either.
-    if (b == nd.box && n != node) break;
+    const Box b = merge(nodes[nd.left()].box, nodes[nd.right()].box);
+    if (scope == RefitScope::until_unchanged && b == nd.box) return;
+    const float old_area = nd.area;
     nd.set_box(b);
+    if (inner_area_sum) *inner_area_sum += static_cast<double>(nd.area) - old_area;
   }
 }
 
 void Bvh::refit(const PrimitiveRefs& refs) {
   for (uint32_t n : post_order()) {
     BvhNode& nd = nodes[n];
-    Box b;
-    if (nd.is_leaf()) {
-      for (uint32_t i = 0; i < nd.ref_count(); ++i) b.extend(refs.boxes[ref_indices[nd.first_ref() + i]]);
-    } else {
-      b = merge(nodes[nd.left()].box, nodes[nd.right()].box);
+    if (!nd.is_leaf()) {
+      refit_node(n);
+      continue;
     }
+    Box b;
+    for (uint32_t i = 0; i < nd.ref_count(); ++i) b.extend(refs.boxes[ref_indices[nd.first_ref() + i]]);
     nd.set_box(b);
   }
 }

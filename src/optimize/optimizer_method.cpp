@@ -1,0 +1,24 @@
+#include "bvhopt/optimizer_method.h"
+
+namespace bvhopt {
+
+std::string_view optimizer_method_name(OptimizerMethod m) {
+  switch (m) {
+    case OptimizerMethod::hill_climb: return "hill-climb";
+    case OptimizerMethod::anneal: return "anneal";
+    case OptimizerMethod::insertion: return "insertion";
+  }
+  return "anneal";
+}
+
+std::vector<OptimizerMethod> optimizer_methods() {
+  return {OptimizerMethod::hill_climb, OptimizerMethod::anneal, OptimizerMethod::insertion};
+}
+
+std::optional<OptimizerMethod> parse_optimizer_method(std::string_view name) {
+  for (OptimizerMethod m : optimizer_methods())
+    if (optimizer_method_name(m) == name) return m;
+  return std::nullopt;
+}
+
+}  // namespace bvhopt

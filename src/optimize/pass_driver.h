@@ -1,0 +1,116 @@
+// The pass loop every optimizer runs (private to the library): the clock, the limits, the
+// per-pass record and callback, the stop reason, and keeping the best tree seen.
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <optional>
+#include <utility>
+
+#include "bvhopt/optimize_report.h"
+#include "bvhopt/optimizer_config.h"
+
+namespace bvhopt::detail {
+
+// What one pass tells the driver.
+struct PassResult {
+  double cost = 0.0;         // the tree's cost after the pass
+  uint64_t moves = 0;
+  double temperature = 0.0;
+  bool converged = false;    // the method's own stopping rule is met
+};
+
+// One optimizer run. The clock starts at construction, so setup counts in the reported
+// seconds. A method with several stages (insertion's hybrid form) calls run() once per stage
+// on the same driver: pass numbers, limits and the trace run across the stages.
+class PassDriver {
+ public:
+  explicit PassDriver(const OptimizeLimits& limits) : limits_(limits) {}
+
+  // The cost before the first pass (also the final cost of a run that makes no pass).
+  void set_initial_cost(double cost) {
+    report_.initial_cost = report_.final_cost = cost;
+    best_ = cost;
+  }
+
+  double elapsed() const { return std::chrono::duration<double>(Clock::now() - start_).count(); }
+
+  // Runs passes of `work` until its stopping rule or a limit, then leaves the lowest-cost
+  // tree of this stage in it if the work asked for that. Work provides:
+  //   double cost() const                      the tree's cost now
+  //   bool keep_best_before(uint32_t pass)     whether `pass` may raise the cost and the
+  //                                            best tree is wanted back if it does
+  //   Snapshot snapshot() const; void restore(const Snapshot&)
+  //   PassResult run_pass(uint32_t pass, double stage_best)
+  // Passes are numbered from 0 over the whole run; stage_best is the lowest cost of this
+  // stage before the pass (its starting cost included).
+  template <class Work>
+  void run(Work& work) {
+    double stage_best = work.cost();
+    bool current_is_best = true;
+    // Valid only while it holds the tree of cost stage_best. Taken lazily, just before a pass
+    // that may lose that tree, and only if the current tree is that one.
+    std::optional<decltype(work.snapshot())> best_tree;
+    while (true) {
+      if (limits_.max_passes != 0 && report_.passes >= limits_.max_passes) {  // a later stage's start
+        report_.stop_reason = StopReason::pass_limit;
+        break;
+      }
+      const uint32_t pass = report_.passes;
+      if (current_is_best && !best_tree && work.keep_best_before(pass)) best_tree = work.snapshot();
+      const PassResult r = work.run_pass(pass, stage_best);
+      if (r.cost < stage_best) {
+        stage_best = r.cost;
+        best_tree.reset();
+      }
+      current_is_best = r.cost <= stage_best;
+      if (record(r)) break;
+    }
+    if (!current_is_best && best_tree) work.restore(std::move(*best_tree));
+    report_.final_cost = work.cost();
+  }
+
+  // After the last stage (or instead of any): the report, with the total time.
+  OptimizeReport finish() {
+    report_.seconds = elapsed();
+    return std::move(report_);
+  }
+  StopReason stop_reason() const { return report_.stop_reason; }
+  void stop(StopReason reason) { report_.stop_reason = reason; }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+
+  // Adds the pass to the report and calls back; true when the run must stop.
+  bool record(const PassResult& r) {
+    best_ = std::min(best_, r.cost);
+    PassRecord rec;
+    rec.pass = ++report_.passes;
+    rec.cost = r.cost;
+    rec.best_cost = best_;
+    rec.temperature = r.temperature;
+    rec.moves = r.moves;
+    rec.seconds = elapsed();
+    report_.trace.push_back(rec);
+    report_.moves += r.moves;
+    if (limits_.on_pass) limits_.on_pass(rec);
+    if (r.converged) {
+      report_.stop_reason = StopReason::converged;
+    } else if (limits_.max_passes != 0 && report_.passes >= limits_.max_passes) {
+      report_.stop_reason = StopReason::pass_limit;
+    } else if (limits_.time_limit > 0.0 && rec.seconds >= limits_.time_limit) {
+      report_.stop_reason = StopReason::time_limit;
+    } else {
+      return false;
+    }
+    return true;
+  }
+
+  const Clock::time_point start_ = Clock::now();
+  const OptimizeLimits& limits_;
+  OptimizeReport report_;
+  double best_ = 0.0;  // lowest cost of the whole run, for the records
+};
+
+}  // namespace bvhopt::detail
