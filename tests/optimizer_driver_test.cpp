@@ -1,0 +1,273 @@
+// What the three optimizers share through the pass driver: tracked costs that are the trees'
+// true costs, the stop reasons, the random stream, and trees that do not depend on the
+// number of threads.
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "bvhopt/cost.h"
+#include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/median_builder.h"
+#include "bvhopt/optimizer_method.h"
+#include "bvhopt/random_stream.h"
+#include "bvhopt/sweep_sah_builder.h"
+#include "bvhopt/tree_rotations.h"
+#include "bvhopt/validate.h"
+#include "test_support.h"
+
+namespace bvhopt {
+namespace {
+
+double relative_gap(double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-300); }
+
+// A short annealing schedule: hot passes that raise the cost, then the quench.
+AnnealConfig short_anneal() {
+  AnnealConfig cfg;
+  cfg.schedule_passes = 24;
+  cfg.period = 6;
+  cfg.seed = 5;
+  return cfg;
+}
+
+InsertionConfig insertion_of(InsertionForm form) {
+  InsertionConfig cfg;
+  cfg.form = form;
+  cfg.batch = 0.03;
+  cfg.seed = 7;
+  return cfg;
+}
+
+const InsertionForm kForms[] = {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid};
+
+// The rotations work on a copy of the tree, so the tree after pass k is only seen by running
+// k passes: each run's last record must be the cost of the tree it returns (keep_best off, so
+// the last tree is the one returned), and the runs must retrace the full run.
+template <class Config, class Optimize>
+void expect_rotation_costs_exact(const Bvh& start, Config cfg, Optimize optimize) {
+  Bvh full = start;
+  const OptimizeReport all = optimize(full, cfg);
+  ASSERT_GT(all.passes, 3u);
+  EXPECT_LT(relative_gap(all.final_cost, sah_cost(full)), 1e-9);
+  EXPECT_LT(relative_gap(all.initial_cost, sah_cost(start)), 1e-9);
+  for (uint32_t k = 1; k <= all.passes; ++k) {
+    Bvh bvh = start;
+    cfg.limits.max_passes = k;
+    const OptimizeReport r = optimize(bvh, cfg);
+    ASSERT_EQ(r.passes, k);
+    EXPECT_EQ(r.trace.back().cost, all.trace[k - 1].cost) << "pass " << k;
+    EXPECT_EQ(r.final_cost, r.trace.back().cost) << "pass " << k;
+    EXPECT_LT(relative_gap(r.final_cost, sah_cost(bvh)), 1e-9) << "pass " << k;
+  }
+}
+
+TEST(OptimizerDriver, RotationCostsAreTheTreesCosts) {
+  PrimitiveRefs refs = testing::random_refs(1500, 21);
+  const Bvh start = build_spatial_median(refs);
+  expect_rotation_costs_exact(start, HillClimbConfig{}, [](Bvh& b, const HillClimbConfig& c) { return hill_climb(b, c); });
+  AnnealConfig ac = short_anneal();
+  ac.keep_best = false;
+  expect_rotation_costs_exact(start, ac, [](Bvh& b, const AnnealConfig& c) { return anneal(b, c); });
+}
+
+// Insertion changes the tree in place, so every record is checked against the tree as it
+// stands when the callback runs; the final cost against the returned tree (the best one).
+TEST(OptimizerDriver, InsertionCostsAreTheTreesCosts) {
+  PrimitiveRefs refs = testing::random_refs(1500, 22);
+  for (InsertionForm form : kForms) {
+    Bvh bvh = build_spatial_median(refs);
+    const double before = sah_cost(bvh);
+    InsertionConfig cfg = insertion_of(form);
+    uint32_t checked = 0;
+    cfg.limits.on_pass = [&](const PassRecord& p) {
+      EXPECT_LT(relative_gap(p.cost, sah_cost(bvh)), 1e-9) << form_name(form) << " pass " << p.pass;
+      ++checked;
+    };
+    const OptimizeReport r = optimize_insertion(bvh, cfg);
+    EXPECT_EQ(checked, r.passes);
+    EXPECT_GT(r.passes, 3u);
+    EXPECT_LT(relative_gap(r.initial_cost, before), 1e-9) << form_name(form);
+    EXPECT_LT(relative_gap(r.final_cost, sah_cost(bvh)), 1e-9) << form_name(form);
+    double best = r.initial_cost;
+    for (const PassRecord& p : r.trace) best = std::min(best, p.cost);
+    EXPECT_EQ(r.trace.back().best_cost, best);
+    // The sequential stage keeps the best tree it saw, the parallel one never raises the cost.
+    EXPECT_LE(r.final_cost, r.trace.back().cost);
+  }
+}
+
+// The optimizers by name, with the limits (and callback) under test filled in.
+using Runner = std::function<OptimizeReport(Bvh&, const OptimizeLimits&)>;
+std::vector<std::pair<std::string, Runner>> every_optimizer() {
+  std::vector<std::pair<std::string, Runner>> all;
+  all.emplace_back("hill-climb", [](Bvh& b, const OptimizeLimits& l) {
+    HillClimbConfig c;
+    c.limits = l;
+    return hill_climb(b, c);
+  });
+  all.emplace_back("anneal", [](Bvh& b, const OptimizeLimits& l) {
+    AnnealConfig c = short_anneal();
+    c.limits = l;
+    return anneal(b, c);
+  });
+  for (InsertionForm form : kForms)
+    all.emplace_back(std::string(form_name(form)), [form](Bvh& b, const OptimizeLimits& l) {
+      InsertionConfig c = insertion_of(form);
+      c.limits = l;
+      return optimize_insertion(b, c);
+    });
+  return all;
+}
+
+TEST(OptimizerDriver, StopReasons) {
+  PrimitiveRefs refs = testing::random_refs(2000, 23);
+  const Bvh start = build_spatial_median(refs);
+  for (const auto& [name, run] : every_optimizer()) {
+    {
+      Bvh bvh = start;
+      const OptimizeReport r = run(bvh, OptimizeLimits{});
+      EXPECT_EQ(r.stop_reason, StopReason::converged) << name;
+      EXPECT_GT(r.passes, 2u) << name;
+      EXPECT_TRUE(validate(bvh, refs).ok()) << name;
+    }
+    {
+      Bvh bvh = start;
+      OptimizeLimits limits;
+      limits.max_passes = 2;
+      uint32_t calls = 0;
+      limits.on_pass = [&](const PassRecord& p) { EXPECT_EQ(p.pass, ++calls) << name; };
+      const OptimizeReport r = run(bvh, limits);
+      EXPECT_EQ(r.stop_reason, StopReason::pass_limit) << name;
+      EXPECT_EQ(r.passes, 2u) << name;
+      EXPECT_EQ(r.trace.size(), 2u) << name;
+      EXPECT_EQ(calls, 2u) << name;
+    }
+    {
+      Bvh bvh = start;
+      OptimizeLimits limits;
+      limits.time_limit = 1e-9;  // expires during the first pass
+      const OptimizeReport r = run(bvh, limits);
+      EXPECT_EQ(r.stop_reason, StopReason::time_limit) << name;
+      EXPECT_EQ(r.passes, 1u) << name;
+    }
+  }
+}
+
+// A pass limit met exactly when the hybrid's sequential stage converges stops the run before
+// its parallel stage makes any pass.
+TEST(OptimizerDriver, PassLimitAtAStageBoundary) {
+  PrimitiveRefs refs = testing::random_refs(2000, 24);
+  const Bvh start = build_spatial_median(refs);
+  Bvh seq = start;
+  const OptimizeReport s = optimize_insertion(seq, insertion_of(InsertionForm::sequential));
+  ASSERT_EQ(s.stop_reason, StopReason::converged);
+  Bvh hyb = start;
+  InsertionConfig cfg = insertion_of(InsertionForm::hybrid);
+  cfg.limits.max_passes = s.passes;
+  const OptimizeReport h = optimize_insertion(hyb, cfg);
+  EXPECT_EQ(h.stop_reason, StopReason::pass_limit);
+  EXPECT_EQ(h.passes, s.passes);
+  EXPECT_EQ(testing::tree_signature(hyb, refs), testing::tree_signature(seq, refs));
+}
+
+TEST(OptimizerDriver, StopReasonNamesAreTheFileWords) {
+  EXPECT_EQ(stop_reason_name(StopReason::converged), "converged");
+  EXPECT_EQ(stop_reason_name(StopReason::pass_limit), "pass limit");
+  EXPECT_EQ(stop_reason_name(StopReason::time_limit), "time limit");
+  EXPECT_EQ(stop_reason_name(StopReason::empty_tree), "empty tree");
+  EXPECT_EQ(stop_reason_name(StopReason::nothing_to_optimize), "nothing to optimize");
+  Bvh empty;
+  EXPECT_EQ(optimize_insertion(empty).stop_reason, StopReason::empty_tree);
+}
+
+TEST(OptimizerDriver, MethodNames) {
+  std::vector<std::string> names;
+  for (OptimizerMethod m : optimizer_methods()) {
+    names.emplace_back(optimizer_method_name(m));
+    EXPECT_EQ(parse_optimizer_method(optimizer_method_name(m)), m);
+  }
+  EXPECT_EQ(names, (std::vector<std::string>{"hill-climb", "anneal", "insertion"}));
+  EXPECT_FALSE(parse_optimizer_method("annealing").has_value());
+}
+
+// Values of splitmix64 as the optimizers and ray sets drew them before the stream was shared:
+// any change here changes every annealed and insertion-optimized tree and every ray set.
+TEST(RandomStream, SameSequenceAsBefore) {
+  RandomStream zero{0};
+  EXPECT_EQ(zero.next(), 0xe220a8397b1dcdafull);  // the published first value for seed 0
+  EXPECT_EQ(zero.next(), 0x6e789e6aa1b965f4ull);
+  EXPECT_EQ(zero.next(), 0x06c45d188009454full);
+  RandomStream s{12345};
+  EXPECT_EQ(s.next(), 0x22118258a9d111a0ull);
+  EXPECT_EQ(s.next(), 0x346edce5f713f8edull);
+  EXPECT_EQ(s.next(), 0x1e9a57bc80e6721dull);
+  // Insertion's random selection: seed 7, pass 3, among 1000 nodes.
+  RandomStream sel{7 * kGoldenGamma + 3};
+  for (uint32_t expect : {888u, 491u, 888u, 698u, 711u}) EXPECT_EQ(sel.below(1000), expect);
+  RandomStream f{42};
+  for (uint32_t expect : {12441394u, 2682851u, 4674151u}) EXPECT_EQ(f.uniform_float() * 0x1p24f, float(expect));
+  RandomStream d{42};
+  for (double expect : {0.7415648787718234, 0.15991039287692016, 0.2786011302551387})
+    EXPECT_EQ(d.open_uniform(), expect);
+  static_assert(mix64(0) == 0);
+}
+
+// The same tree, cost, passes and moves on one thread, the default pool, and an arena of 8
+// threads (more than this machine's cores, so tasks interleave in every order).
+TEST(OptimizerDriver, SameTreesOnAnyNumberOfThreads) {
+  // Large enough that the rotations split the tree into pieces run in parallel.
+  PrimitiveRefs refs = testing::random_refs(20000, 25);
+  const Bvh start = build_spatial_median(refs);
+  struct Outcome {
+    std::string tree;
+    double cost;
+    uint32_t passes;
+    uint64_t moves;
+  };
+  auto run_all = [&] {
+    std::vector<Outcome> out;
+    for (const auto& [name, run] : every_optimizer()) {
+      Bvh bvh = start;
+      OptimizeLimits limits;
+      limits.max_passes = 30;
+      const OptimizeReport r = run(bvh, limits);
+      out.push_back({testing::tree_signature(bvh, refs), r.final_cost, r.passes, r.moves});
+    }
+    return out;
+  };
+  std::vector<Outcome> one;
+  {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    one = run_all();
+  }
+  const std::vector<Outcome> pool = run_all();
+  std::vector<Outcome> eight_threads;
+  {
+    // Without raising the process-wide limit (the core count) the arena would get fewer workers.
+    tbb::global_control allow(tbb::global_control::max_allowed_parallelism, 8);
+    tbb::task_arena arena(8);
+    arena.execute([&] {
+      EXPECT_EQ(tbb::this_task_arena::max_concurrency(), 8);
+      eight_threads = run_all();
+    });
+  }
+  const std::vector<Outcome>& eight = eight_threads;
+  const auto names = every_optimizer();
+  for (size_t i = 0; i < one.size(); ++i) {
+    for (const std::vector<Outcome>* other : {&pool, &eight}) {
+      EXPECT_EQ((*other)[i].tree, one[i].tree) << names[i].first;
+      EXPECT_EQ((*other)[i].cost, one[i].cost) << names[i].first;
+      EXPECT_EQ((*other)[i].passes, one[i].passes) << names[i].first;
+      EXPECT_EQ((*other)[i].moves, one[i].moves) << names[i].first;
+    }
+    EXPECT_GT(one[i].moves, 0u) << names[i].first;
+  }
+}
+
+}  // namespace
+}  // namespace bvhopt
