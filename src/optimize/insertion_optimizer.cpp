@@ -12,6 +12,7 @@
 
 #include "bvhopt/random_stream.h"
 #include "bvhopt/testing/insertion_hooks.h"
+#include "optimize/find_by_name.h"
 #include "optimize/pass_driver.h"
 #include "optimize/reinsertion_search.h"
 
@@ -32,9 +33,7 @@ std::vector<InsertionMeasure> insertion_measures() {
 }
 
 std::optional<InsertionMeasure> parse_measure(std::string_view name) {
-  for (InsertionMeasure m : insertion_measures())
-    if (measure_name(m) == name) return m;
-  return std::nullopt;
+  return detail::find_by_name(insertion_measures(), measure_name, name);
 }
 
 std::string_view form_name(InsertionForm f) {
@@ -51,9 +50,7 @@ std::vector<InsertionForm> insertion_forms() {
 }
 
 std::optional<InsertionForm> parse_form(std::string_view name) {
-  for (InsertionForm f : insertion_forms())
-    if (form_name(f) == name) return f;
-  return std::nullopt;
+  return detail::find_by_name(insertion_forms(), form_name, name);
 }
 
 ReinsertionCandidate find_reinsertion(const Bvh& bvh, const Box& box, uint32_t skip, uint32_t pass_through) {

@@ -1,5 +1,7 @@
 #include "bvhopt/optimizer_method.h"
 
+#include "optimize/find_by_name.h"
+
 namespace bvhopt {
 
 std::string_view optimizer_method_name(OptimizerMethod m) {
@@ -16,9 +18,7 @@ std::vector<OptimizerMethod> optimizer_methods() {
 }
 
 std::optional<OptimizerMethod> parse_optimizer_method(std::string_view name) {
-  for (OptimizerMethod m : optimizer_methods())
-    if (optimizer_method_name(m) == name) return m;
-  return std::nullopt;
+  return detail::find_by_name(optimizer_methods(), optimizer_method_name, name);
 }
 
 }  // namespace bvhopt
