@@ -1,5 +1,7 @@
 // bvhopt build: scene -> references -> top-down build -> BVH file.
 #include <iostream>
+#include <string>
+#include <vector>
 
 #include "bvhopt/build.h"
 #include "bvhopt/bvh_file.h"
@@ -17,22 +19,30 @@ void register_build_command(CLI::App& app) {
     EvhOption evh;
     ThreadsOption threads;
     CostOption cost;
-    std::string builder = "sweep";
-    uint32_t leaf_size = 1;
-    uint32_t bins = 32;
+    BuildOptions build;  // --leaf-size and --bins write straight into it
+    std::string builder{builder_name(BuildOptions{}.kind)};
+    CLI::Option* bins = nullptr;
     std::string output;
     bool json = false;
   };
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand("build", "Build a BVH over a scene with a top-down builder and save it");
   opt->scene.add_to(cmd);
-  cmd->add_option("--builder", opt->builder, "sweep | binned | spatial-median | object-median")
-      ->check(CLI::IsMember({"sweep", "binned", "spatial-median", "object-median"}))
-      ->capture_default_str();
-  cmd->add_option("--leaf-size", opt->leaf_size, "Largest number of references per leaf")
+  std::vector<std::string> names;
+  std::string names_help;
+  for (BuilderKind kind : all_builders()) {
+    names.emplace_back(builder_name(kind));
+    names_help += (names_help.empty() ? "" : " | ") + names.back();
+  }
+  cmd->add_option("--builder", opt->builder, names_help)->check(CLI::IsMember(names))->capture_default_str();
+  cmd->add_option("--leaf-size", opt->build.leaf.max_leaf_size, "Largest number of references per leaf")
       ->check(CLI::Range(1u, 65535u))
       ->capture_default_str();
-  cmd->add_option("--bins", opt->bins, "Bins per axis for the binned builder")->check(CLI::Range(2u, 1024u))->capture_default_str();
+  opt->bins = cmd->add_option("--bins", opt->build.binned.bin_count,
+                              "Bins per axis at every node for the binned builder. Without it, large nodes get more "
+                              "bins (up to " + std::to_string(kMaxBinCount) + ") and small ones fewer")
+                  ->check(CLI::Range(kMinBinCount, kMaxBinCount))
+                  ->capture_default_str();
   opt->evh.add_to(cmd);
   opt->cost.add_to(cmd);
   opt->threads.add_to(cmd);
@@ -46,11 +56,12 @@ void register_build_command(CLI::App& app) {
     Mesh mesh = opt->scene.load();
     double load_s = load_clock.seconds();
 
-    BuildOptions options;
+    BuildOptions options = opt->build;
     options.kind = *parse_builder(opt->builder);
     options.cost = opt->cost.model();
-    options.leaf.max_leaf_size = opt->leaf_size;
-    options.bin_count = opt->bins;
+    // An explicit bin count holds at every node; the adaptive count is the default's.
+    if (opt->bins->count() > 0) options.binned.refs_per_bin = 0;
+    const uint32_t leaf_size = options.leaf.max_leaf_size;
     progress.update("building " + std::to_string(mesh.triangle_count()) + " triangles with " + opt->builder, true);
     Stopwatch build_clock;
     std::string evh_report;
@@ -75,7 +86,7 @@ void register_build_command(CLI::App& app) {
                   {"triangles", mesh.triangle_count()},
                   {"references", refs.size()},
                   {"builder", opt->builder},
-                  {"leaf_size", opt->leaf_size},
+                  {"leaf_size", leaf_size},
                   {"threads", opt->threads.effective()},
                   {"load_seconds", load_s},
                   {"build_seconds", build_s},
@@ -90,7 +101,7 @@ void register_build_command(CLI::App& app) {
     std::cout << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles, loaded in "
               << format_double(load_s, 2) << " s)\n"
               << (opt->evh.enabled ? "evh        " + evh_report + "\n" : std::string())
-              << "builder    " << opt->builder << ", leaf size " << opt->leaf_size << ", "
+              << "builder    " << opt->builder << ", leaf size " << leaf_size << ", "
               << opt->threads.effective() << " threads\n"
               << "build      " << format_double(build_s * 1e3, 1) << " ms\n"
               << "cost       " << format_double(st.cost, 3) << "  (ocost " << format_double(st.ocost, 3) << ")\n"

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "bvhopt/cost_model.h"
+#include "bvhopt/edge_volume_subdivision.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/references.h"
 #include "bvhopt/vec3.h"
@@ -37,8 +38,8 @@ struct SceneOption {
 // references, wherever a scene is built.
 struct EvhOption {
   bool enabled = false;
-  int t = 14;
-  double max_ratio = 8.0;
+  int t = EdgeVolumeConfig{}.t;
+  double max_ratio = EdgeVolumeConfig{}.max_reference_ratio;
   void add_to(CLI::App* app);
   // One reference per triangle, or the subdivided references when enabled; `report` gets a
   // line saying what was done (empty when not enabled).
@@ -47,8 +48,8 @@ struct EvhOption {
 
 // --ct / --ci: the SAH cost constants.
 struct CostOption {
-  double traversal = 3.0;
-  double intersection = 2.0;
+  double traversal = CostModel{}.traversal;
+  double intersection = CostModel{}.intersection;
   void add_to(CLI::App* app);
   CostModel model() const { return CostModel{traversal, intersection}; }
 };

@@ -13,6 +13,7 @@
 
 #include "bvhopt/build.h"
 #include "bvhopt/cost.h"
+#include "bvhopt/error.h"
 #include "bvhopt/validate.h"
 #include "test_support.h"
 
@@ -370,20 +371,163 @@ TEST(Builders, SahBuildersBeatMediansOnRandomMeshes) {
   EXPECT_LT(binned, sweep * 1.05);
 }
 
+// Each count up to the maximum is used as given: every count gives a valid tree, and on a
+// scene this large no two counts give the same tree (clamping would merge the top ones).
 TEST(Builders, BinnedSahHonoursBinCount) {
   PrimitiveRefs refs = make_references(random_mesh(5000, 8, false));
-  for (uint32_t bins : {2u, 4u, 16u, 64u, 256u, 1000u}) {
+  std::vector<std::string> signatures;
+  for (uint32_t bins : {2u, 4u, 16u, 64u, 127u, kMaxBinCount}) {
     BinnedSahConfig c;
     c.bin_count = bins;
     c.refs_per_bin = 0;  // exactly bin_count bins in every node
     Bvh bvh = build_binned_sah(refs, c);
     check_tree(bvh, refs, 1, "bins " + std::to_string(bins));
+    signatures.push_back(tree_signature(bvh, refs));
   }
+  for (size_t i = 0; i < signatures.size(); ++i)
+    for (size_t j = i + 1; j < signatures.size(); ++j) EXPECT_NE(signatures[i], signatures[j]) << i << " " << j;
   BinnedSahConfig few, many;
   few.bin_count = 4;
   many.bin_count = 64;
   few.refs_per_bin = many.refs_per_bin = 0;
   EXPECT_LT(sah_cost(build_binned_sah(refs, many)), sah_cost(build_binned_sah(refs, few)));
+}
+
+// BuildOptions passes the binned builder's own settings through: a fixed count differs
+// from the adaptive default (whose large nodes get more bins), and two fixed counts differ.
+TEST(Builders, BuildOptionsCarryTheBinnedSettings) {
+  PrimitiveRefs refs = make_references(random_mesh(20000, 5, false));
+  BuildOptions adaptive;
+  adaptive.kind = BuilderKind::binned_sah;
+  BuildOptions fixed32 = adaptive, fixed8 = adaptive;
+  fixed32.binned.refs_per_bin = fixed8.binned.refs_per_bin = 0;
+  fixed8.binned.bin_count = 8;
+  const std::string a = tree_signature(build_bvh(refs, adaptive), refs);
+  const std::string f32 = tree_signature(build_bvh(refs, fixed32), refs);
+  const std::string f8 = tree_signature(build_bvh(refs, fixed8), refs);
+  EXPECT_NE(a, f32);
+  EXPECT_NE(f32, f8);
+  // And the shared settings reach the builder: the same tree as the builder called directly.
+  EXPECT_EQ(a, tree_signature(build_binned_sah(refs, BinnedSahConfig{}), refs));
+  EXPECT_EQ(f8, tree_signature(build_binned_sah(refs, binned_sah_config(fixed8)), refs));
+  EXPECT_EQ(binned_sah_config(fixed8).bin_count, 8u);
+  EXPECT_EQ(binned_sah_config(fixed8).refs_per_bin, 0u);
+}
+
+// Runs `build` and expects an Error whose message contains every one of `parts`.
+void expect_config_error(const std::function<void()>& build, std::initializer_list<const char*> parts,
+                         const std::string& what) {
+  try {
+    build();
+    ADD_FAILURE() << what << ": no error";
+  } catch (const Error& e) {
+    for (const char* part : parts) EXPECT_NE(std::string(e.what()).find(part), std::string::npos) << what << ": " << e.what();
+  }
+}
+
+TEST(Builders, BinnedConfigOutOfRangeIsAnError) {
+  PrimitiveRefs refs = make_references(random_mesh(200, 2, false));
+  for (uint32_t bins : {0u, 1u, kMaxBinCount + 1, 1024u}) {
+    BinnedSahConfig c;
+    c.bin_count = bins;
+    expect_config_error([&] { build_binned_sah(refs, c); }, {"bin_count", "2 to 128"}, "bin_count " + std::to_string(bins));
+    BuildOptions o;
+    o.kind = BuilderKind::binned_sah;
+    o.binned.bin_count = bins;
+    expect_config_error([&] { build_bvh(refs, o); }, {"bin_count", "2 to 128"}, "BuildOptions bins " + std::to_string(bins));
+    expect_config_error([&] { validate(o); }, {"bin_count"}, "validate bins " + std::to_string(bins));
+  }
+  BinnedSahConfig c;
+  c.max_bin_count = 1000;
+  expect_config_error([&] { build_binned_sah(refs, c); }, {"max_bin_count", "1000", "2 to 128"}, "max_bin_count");
+  c = BinnedSahConfig{};
+  c.exact_sweep_below = kMaxExactSweepBelow + 1;
+  expect_config_error([&] { build_binned_sah(refs, c); }, {"exact_sweep_below", "0 to 256"}, "exact_sweep_below");
+  // The limits themselves are allowed.
+  c = BinnedSahConfig{};
+  c.bin_count = c.max_bin_count = kMaxBinCount;
+  c.exact_sweep_below = kMaxExactSweepBelow;
+  EXPECT_NO_THROW(check_tree(build_binned_sah(refs, c), refs, 1, "limits"));
+  c.exact_sweep_below = 0;
+  c.bin_count = kMinBinCount;
+  EXPECT_NO_THROW(check_tree(build_binned_sah(refs, c), refs, 1, "lower limits"));
+}
+
+TEST(Builders, SharedConfigOutOfRangeIsAnErrorForEveryBuilder) {
+  PrimitiveRefs refs = make_references(random_mesh(50, 2, false));
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  for (BuilderKind kind : all_builders()) {
+    const std::string name(builder_name(kind));
+    BuildOptions o;
+    o.kind = kind;
+    o.leaf.max_leaf_size = 0;
+    expect_config_error([&] { build_bvh(refs, o); }, {"max_leaf_size", "at least 1"}, name + " leaf 0");
+    // Also on empty input: a bad config is an error whatever the scene.
+    expect_config_error([&] { build_bvh(PrimitiveRefs{}, o); }, {"max_leaf_size"}, name + " leaf 0, no refs");
+    for (double bad : {nan, inf, -1.0}) {
+      o = BuildOptions{};
+      o.kind = kind;
+      o.cost.traversal = bad;
+      expect_config_error([&] { build_bvh(refs, o); }, {"c_T", "finite and >= 0"}, name + " c_T");
+      o = BuildOptions{};
+      o.kind = kind;
+      o.cost.intersection = bad;
+      expect_config_error([&] { build_bvh(refs, o); }, {"c_I", "finite and >= 0"}, name + " c_I");
+    }
+  }
+  SweepSahConfig sweep;
+  sweep.leaf.max_leaf_size = 0;
+  expect_config_error([&] { build_sweep_sah(refs, sweep); }, {"max_leaf_size"}, "sweep direct");
+  MedianConfig median;
+  median.cost.intersection = -2.0;
+  expect_config_error([&] { build_object_median(refs, median); }, {"c_I"}, "median direct");
+}
+
+// References under node n, sorted.
+std::vector<uint32_t> refs_below(const Bvh& bvh, uint32_t n) {
+  std::vector<uint32_t> out, stack{n};
+  while (!stack.empty()) {
+    const BvhNode& node = bvh.nodes[stack.back()];
+    stack.pop_back();
+    if (node.is_leaf()) {
+      for (uint32_t k = 0; k < node.ref_count(); ++k) out.push_back(bvh.ref_indices[node.first_ref() + k]);
+    } else {
+      stack.push_back(node.left());
+      stack.push_back(node.right());
+    }
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// Hand-made input with one right answer: two clusters of four unit boxes, 100 apart on x
+// and interleaved in id order. Every builder must split the root exactly between them.
+TEST(Builders, TwoSeparatedClustersAreSplitAtTheRoot) {
+  PrimitiveRefs refs;
+  refs.resize(8);
+  for (uint32_t i = 0; i < 8; ++i) {
+    const float x = (i % 2 ? 100.0f : 0.0f) + 0.5f * float(i / 2);
+    const float y = float(i / 2) * 0.25f;
+    refs.boxes[i] = Box(Vec3(x, y, 0.0f), Vec3(x + 1.0f, y + 1.0f, 1.0f));
+    refs.centroids[i] = refs.boxes[i].center();
+    refs.triangle_ids[i] = i;
+  }
+  const std::vector<uint32_t> even{0, 2, 4, 6}, odd{1, 3, 5, 7};
+  for (BuilderKind kind : all_builders())
+    for (uint32_t leaf : {1u, 4u}) {
+      const std::string what = std::string(builder_name(kind)) + " leaf " + std::to_string(leaf);
+      BuildOptions o;
+      o.kind = kind;
+      o.leaf.max_leaf_size = leaf;
+      Bvh bvh = build_bvh(refs, o);
+      check_tree(bvh, refs, leaf, what);
+      const BvhNode& root = bvh.nodes[bvh.root];
+      ASSERT_FALSE(root.is_leaf()) << what;
+      std::vector<uint32_t> l = refs_below(bvh, root.left()), r = refs_below(bvh, root.right());
+      if (l != even) std::swap(l, r);
+      EXPECT_EQ(l, even) << what;
+      EXPECT_EQ(r, odd) << what;
+    }
 }
 
 }  // namespace

@@ -15,12 +15,22 @@ namespace bvhopt {
 
 enum class BuilderKind { sweep_sah, binned_sah, spatial_median, object_median };
 
-struct BuildOptions {
+// Every setting of every builder: the shared ones (cost, leaf, parallel_threshold) once,
+// and each builder's own next to them, so that build_bvh hands the chosen builder its
+// full config and nothing set here is dropped.
+struct BuildOptions : BuilderConfig {
   BuilderKind kind = BuilderKind::sweep_sah;
-  CostModel cost;
-  LeafConfig leaf;
-  uint32_t bin_count = 32;  // binned SAH only
+  SweepSahParams sweep;    // sweep SAH only
+  BinnedSahParams binned;  // binned SAH only
 };
+
+// The config build_bvh passes to each builder.
+SweepSahConfig sweep_sah_config(const BuildOptions& options);
+BinnedSahConfig binned_sah_config(const BuildOptions& options);
+MedianConfig median_config(const BuildOptions& options);
+
+// Validates the chosen builder's config (throws Error), as build_bvh does.
+void validate(const BuildOptions& options);
 
 Bvh build_bvh(const PrimitiveRefs& refs, const BuildOptions& options = {});
 

@@ -7,10 +7,11 @@
 
 namespace bvhopt {
 
-struct MedianConfig {
-  LeafConfig leaf;
-  uint32_t parallel_threshold = 4096;
-};
+// The median builders have no settings of their own; they ignore `cost`.
+struct MedianConfig : BuilderConfig {};
+
+// Throws Error on a setting out of range (see validate(const BuilderConfig&)).
+void validate(const MedianConfig& config);
 
 // Splits the node's box at the middle of its longest axis (as in Bittner et al.); when all
 // centroids fall on one side, falls back to the object median.

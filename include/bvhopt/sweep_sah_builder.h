@@ -1,22 +1,26 @@
 // Exact sweep SAH: every reference centroid on every axis is a candidate split.
 #pragma once
 
+#include <cstdint>
+
 #include "bvhopt/build_config.h"
 #include "bvhopt/bvh.h"
 #include "bvhopt/references.h"
 
 namespace bvhopt {
 
-struct SweepSahConfig {
-  CostModel cost;     // c_T and c_I weigh a split against a leaf
-  LeafConfig leaf;
-  // Nodes with fewer references than this are built by one task (no further spawning).
-  uint32_t parallel_threshold = 4096;
+// What only the sweep builder has; BuildOptions carries it next to the shared settings.
+struct SweepSahParams {
   // Nodes with at least this many references sweep their three axes, and partition their
   // lists, in parallel: the top nodes are long sequential passes otherwise. They hold 8
   // more bytes per reference of scratch while they do.
   uint32_t parallel_split_threshold = 32768;
 };
+
+struct SweepSahConfig : BuilderConfig, SweepSahParams {};
+
+// Throws Error on a setting out of range (see validate(const BuilderConfig&)).
+void validate(const SweepSahConfig& config);
 
 // References are sorted once per axis by (centroid, id); each node sweeps the three sorted
 // lists and partitions them stably, so the whole build is O(n log n). Every position

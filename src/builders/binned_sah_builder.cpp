@@ -2,10 +2,8 @@
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
-#include <tbb/task_group.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -13,6 +11,8 @@
 #include <vector>
 
 #include "builders/sah_common.h"
+#include "builders/sorted_range_sweep.h"
+#include "builders/top_down.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -57,8 +57,7 @@ inline void extend_box(Box& b, const BinRef& r) {
   b.max = max(b.max, Vec3(r.hi[0], r.hi[1], r.hi[2]));
 }
 
-constexpr uint32_t kMaxBins = 128;
-constexpr uint32_t kMaxExactSweep = 256;
+constexpr uint32_t kMaxBins = kMaxBinCount;
 
 // Per axis, per bin: the union of the boxes whose centroid falls in the bin and their
 // count. Four floats per corner so that one SSE min/max updates a corner.
@@ -182,27 +181,105 @@ inline void bin_range_two_sets(Bins& bins, const BinMapping& m, const BinRef* re
   bins.merge(odd);
 }
 
-class BinnedBuilder {
+// A subtree of at most exact_sweep_below references, built by exact sweeps: the
+// references are sorted per axis by (centroid, id) once, and each split filters the three
+// orders stably, as the sweep builder does. Same tie rules as the bins. Works on a local
+// copy; only the nodes and the leaves' slots are written. Sequential: the scratch is
+// shared by the whole subtree.
+class SmallSubtreeHeuristic {
  public:
-  BinnedBuilder(const PrimitiveRefs& refs, const BinnedSahConfig& config, Bvh& bvh)
-      : refs_(refs), config_(config), bvh_(bvh), n_(refs.size()),
-        bin_count_(std::clamp<uint32_t>(config.bin_count, 2, kMaxBins)),
-        max_bin_count_(std::clamp<uint32_t>(config.max_bin_count, 2, kMaxBins)),
-        exact_sweep_below_(std::clamp<uint32_t>(config.exact_sweep_below, 1, kMaxExactSweep)) {}
+  struct Node {
+    Box box;
+  };
+
+  SmallSubtreeHeuristic(const BinRef* work, size_t begin, size_t count, const BinnedSahConfig& config, Bvh& bvh)
+      : begin_(begin), config_(config), bvh_(bvh) {
+    std::copy(work + begin, work + begin + count, refs_);
+    float key[kMaxExactSweepBelow];
+    for (int a = 0; a < 3; ++a) {
+      uint16_t* o = order_[a];
+      for (size_t i = 0; i < count; ++i) {
+        o[i] = static_cast<uint16_t>(i);
+        key[i] = refs_[i].lo[a] + refs_[i].hi[a];
+      }
+      // Ties by id make the order unique, so the result does not depend on the sort used.
+      std::sort(o, o + count, [&](uint16_t x, uint16_t y) {
+        return key[x] < key[y] || (key[x] == key[y] && refs_[x].id < refs_[y].id);
+      });
+    }
+  }
+
+  size_t split(const detail::NodeRange& r, const BvhNode& node, const Node&, Node& left, Node& right) {
+    const size_t lo = r.begin - begin_, count = r.count();
+    int best_axis = 0;
+    detail::SweepCandidate best[3];
+    for (int a = 0; a < 3; ++a) {
+      const uint16_t* o = order_[a] + lo;
+      best[a] = detail::sweep_sorted_range(
+          count, [&](Box& b, size_t k) { extend_box(b, refs_[o[k]]); },
+          [&](size_t k) -> float& { return right_area_[k]; });
+      if (a > 0 && detail::better_candidate(best[a], best[best_axis])) best_axis = a;
+    }
+    const size_t best_k = best[best_axis].left_count;
+    if (detail::sah_prefers_leaf(config_, node.area, count, best[best_axis].cost)) return 0;
+
+    const uint16_t* chosen = order_[best_axis] + lo;
+    for (size_t k = 0; k < count; ++k) {
+      is_left_[chosen[k]] = k < best_k;
+      extend_box(k < best_k ? left.box : right.box, refs_[chosen[k]]);
+    }
+    for (int a = 0; a < 3; ++a) {
+      if (a == best_axis) continue;
+      uint16_t* o = order_[a] + lo;
+      size_t l = 0, rc = 0;
+      for (size_t k = 0; k < count; ++k) {
+        if (is_left_[o[k]])
+          o[l++] = o[k];
+        else
+          spill_[rc++] = o[k];
+      }
+      std::copy(spill_, spill_ + rc, o + l);
+    }
+    return best_k;
+  }
+
+  void leaf(const detail::NodeRange& r) {
+    for (size_t k = r.begin; k < r.end; ++k) bvh_.ref_indices[k] = refs_[order_[0][k - begin_]].id;
+  }
+
+ private:
+  const size_t begin_;  // the subtree's first slot
+  const BinnedSahConfig& config_;
+  Bvh& bvh_;
+  BinRef refs_[kMaxExactSweepBelow];
+  uint16_t order_[3][kMaxExactSweepBelow];
+  uint16_t spill_[kMaxExactSweepBelow];
+  float right_area_[kMaxExactSweepBelow];
+  uint8_t is_left_[kMaxExactSweepBelow];
+};
+
+// The binned split search for TopDownTree. The builder works on a copy of the references
+// (BinRef) that it partitions in place; each node carries its centroid bounds, over which
+// its bins are laid.
+class BinnedHeuristic {
+ public:
+  struct Node {
+    Box box;
+    CentroidBounds cb;
+  };
+
+  BinnedHeuristic(const PrimitiveRefs& refs, const BinnedSahConfig& config, Bvh& bvh)
+      : refs_(refs), config_(config), bvh_(bvh), n_(refs.size()) {}
 
   void run() {
     bvh_.nodes.assign(2 * n_ - 1, BvhNode{});
     bvh_.ref_indices.resize(n_);
     bvh_.root = 0;
     work_.reset(new BinRef[n_]);
-    struct Reduced {
-      Box box;
-      CentroidBounds cb;
-    };
     BinRef* work = work_.get();
-    Reduced root = tbb::parallel_reduce(
-        tbb::blocked_range<size_t>(0, n_, 16384), Reduced{},
-        [&](const tbb::blocked_range<size_t>& r, Reduced acc) {
+    Node root = tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, n_, 16384), Node{},
+        [&](const tbb::blocked_range<size_t>& r, Node acc) {
           for (size_t i = r.begin(); i < r.end(); ++i) {
             const Box& b = refs_.boxes[i];
             BinRef& w = work[i];
@@ -215,14 +292,61 @@ class BinnedBuilder {
           }
           return acc;
         },
-        [](Reduced a, const Reduced& b) {
+        [](Node a, const Node& b) {
           a.box.extend(b.box);
           a.cb.extend(b.cb);
           return a;
         });
-    build(detail::NodeRange{0, n_, 0}, kInvalidNode, root.box, root.cb);
-    tasks_.wait();
-    if (2 * leaves_.load() - 1 != bvh_.nodes.size()) bvh_.renumber_depth_first();
+    detail::TopDownTree tree(bvh_);
+    tree.build(*this, detail::NodeRange{0, n_, 0}, kInvalidNode, root, config_.parallel_threshold);
+    tree.finish();
+  }
+
+  // Small nodes: the exact sweep, one task for the whole subtree.
+  bool build_subtree(detail::TopDownTree& tree, const detail::NodeRange& r, uint32_t parent, const Node& node) {
+    if (r.count() > config_.exact_sweep_below) return false;
+    SmallSubtreeHeuristic small(work_.get(), r.begin, r.count(), config_, bvh_);
+    tree.build(small, r, parent, SmallSubtreeHeuristic::Node{node.box}, std::numeric_limits<size_t>::max());
+    return true;
+  }
+
+  size_t split(const detail::NodeRange& r, const BvhNode& node, const Node& state, Node& left, Node& right) {
+    const size_t count = r.count();
+    BinRef* refs = work_.get() + r.begin;
+    const uint32_t nbins = bins_for(count);
+    BinMapping mapping(state.cb, nbins);
+    Split split = find_split(bin(refs, count, mapping, nbins));
+
+    size_t left_count = 0;
+    if (split.axis < 0) {
+      // All centroids in one bin (coincident centroids): halve the node in id order.
+      left_count = count / 2;
+      std::nth_element(refs, refs + left_count, refs + count,
+                       [](const BinRef& x, const BinRef& y) { return x.id < y.id; });
+      for (size_t k = 0; k < count; ++k) {
+        extend_box(k < left_count ? split.left : split.right, refs[k]);
+        (k < left_count ? left.cb : right.cb).extend(refs[k]);
+      }
+      split.cost = split.left.area() * float(left_count) + split.right.area() * float(count - left_count);
+    }
+    if (detail::sah_prefers_leaf(config_, node.area, count, split.cost)) return 0;
+    if (split.axis >= 0) {
+      const int axis = split.axis;
+      const uint32_t first_right = split.bin;
+      auto is_left = [&](const BinRef& x) { return mapping.bin(x, axis) < first_right; };
+      left_count = count >= config_.parallel_binning_threshold ? parallel_partition(refs, count, is_left, left.cb, right.cb)
+                                                               : partition(refs, count, is_left, left.cb, right.cb);
+    }
+    left.box = split.left;
+    right.box = split.right;
+    return left_count;
+  }
+
+  void leaf(const detail::NodeRange& r) {
+    for (size_t k = r.begin; k < r.end; ++k) bvh_.ref_indices[k] = work_[k].id;
+    // In id order, so that the tree depends only on each node's set of references, not on
+    // the order a partition left them in (sequential and parallel partitions differ).
+    std::sort(bvh_.ref_indices.begin() + r.begin, bvh_.ref_indices.begin() + r.end);
   }
 
  private:
@@ -232,6 +356,35 @@ class BinnedBuilder {
     float cost = std::numeric_limits<float>::infinity();
     Box left, right;
   };
+
+  // More bins where the pass over the references dwarfs the sweep over the bins, and
+  // fewer where most bins would stay empty anyway.
+  uint32_t bins_for(size_t count) const {
+    const uint32_t base = config_.bin_count;
+    if (config_.refs_per_bin == 0) return base;
+    size_t nbins = std::clamp<size_t>(count / config_.refs_per_bin, base, std::max(base, config_.max_bin_count));
+    return static_cast<uint32_t>(std::min<size_t>(nbins, 4 + count / 5));
+  }
+
+  Bins bin(const BinRef* refs, size_t count, const BinMapping& mapping, uint32_t nbins) const {
+    Bins bins(nbins);
+    if (count >= config_.parallel_binning_threshold) {
+      // Min, max and integer counts merge exactly: the bins do not depend on the split.
+      bins = tbb::parallel_reduce(
+          tbb::blocked_range<size_t>(0, count, 8192), Bins(nbins),
+          [&](const tbb::blocked_range<size_t>& br, Bins acc) {
+            bin_range_two_sets(acc, mapping, refs, br.begin(), br.end());
+            return acc;
+          },
+          [](Bins a, const Bins& b) {
+            a.merge(b);
+            return a;
+          });
+    } else {
+      bin_range_two_sets(bins, mapping, refs, 0, count);
+    }
+    return bins;
+  }
 
   Split find_split(const Bins& bins) const {
     const uint32_t nb = bins.bin_count;
@@ -269,117 +422,6 @@ class BinnedBuilder {
     if (best.axis >= 0)
       for (uint32_t b = 0; b < nb; ++b) (b < best.bin ? best.left : best.right).extend(bins.box(best.axis, b));
     return best;
-  }
-
-  // A subtree of at most config.exact_sweep_below references, built by exact sweeps:
-  // the references are sorted per axis by (centroid, id) once, and each split filters the
-  // three orders stably, as the sweep builder does. Same tie rules as the bins. Works on
-  // a local copy; only the nodes and the leaves' slots are written.
-  struct SmallSubtree {
-    BinRef refs[kMaxExactSweep];
-    uint16_t order[3][kMaxExactSweep];
-    uint16_t spill[kMaxExactSweep];
-    float right_area[kMaxExactSweep];
-    uint8_t is_left[kMaxExactSweep];
-  };
-
-  void build_small(size_t begin, size_t count, uint32_t base, uint32_t parent, const Box& box) {
-    SmallSubtree st;
-    std::copy(work_.get() + begin, work_.get() + begin + count, st.refs);
-    float key[kMaxExactSweep];
-    for (int a = 0; a < 3; ++a) {
-      uint16_t* o = st.order[a];
-      for (size_t i = 0; i < count; ++i) {
-        o[i] = static_cast<uint16_t>(i);
-        key[i] = st.refs[i].lo[a] + st.refs[i].hi[a];
-      }
-      // Ties by id make the order unique, so the result does not depend on the sort used.
-      std::sort(o, o + count, [&](uint16_t x, uint16_t y) {
-        return key[x] < key[y] || (key[x] == key[y] && st.refs[x].id < st.refs[y].id);
-      });
-    }
-    small_node(st, begin, 0, count, base, parent, box);
-  }
-
-  void small_node(SmallSubtree& st, size_t begin, size_t lo, size_t hi, uint32_t base, uint32_t parent, Box box) {
-    const double c_t = config_.cost.traversal, c_i = config_.cost.intersection;
-    const size_t max_leaf = std::max<uint32_t>(1, config_.leaf.max_leaf_size);
-    for (;;) {
-      const size_t count = hi - lo;
-      BvhNode& node = bvh_.nodes[base];
-      node.parent = parent;
-      node.set_box(box);
-      auto leaf = [&] {
-        for (size_t k = lo; k < hi; ++k) bvh_.ref_indices[begin + k] = st.refs[st.order[0][k]].id;
-        node.make_leaf(static_cast<uint32_t>(begin + lo), static_cast<uint32_t>(count));
-        leaves_.fetch_add(1, std::memory_order_relaxed);
-      };
-      if (count == 1) return leaf();
-
-      int best_axis = -1;
-      size_t best_k = 0, best_balance = ~size_t(0);
-      float best_cost = std::numeric_limits<float>::infinity();
-      for (int a = 0; a < 3; ++a) {
-        const uint16_t* o = st.order[a] + lo;
-        Box right;
-        for (size_t k = count - 1; k > 0; --k) {
-          extend_box(right, st.refs[o[k]]);
-          st.right_area[k] = right.area_unchecked();
-        }
-        Box left;
-        for (size_t k = 1; k < count; ++k) {
-          extend_box(left, st.refs[o[k - 1]]);
-          float c = left.area_unchecked() * float(k) + st.right_area[k] * float(count - k);
-          if (c <= best_cost) {
-            size_t balance = k * 2 > count ? k * 2 - count : count - k * 2;
-            if (c < best_cost || balance < best_balance) {
-              best_axis = a;
-              best_k = k;
-              best_cost = c;
-              best_balance = balance;
-            }
-          }
-        }
-      }
-      if (count <= max_leaf && c_i * node.area * double(count) <= c_t * node.area + c_i * double(best_cost))
-        return leaf();
-
-      Box left_box, right_box;
-      const uint16_t* chosen = st.order[best_axis] + lo;
-      for (size_t k = 0; k < count; ++k) {
-        st.is_left[chosen[k]] = k < best_k;
-        extend_box(k < best_k ? left_box : right_box, st.refs[chosen[k]]);
-      }
-      for (int a = 0; a < 3; ++a) {
-        if (a == best_axis) continue;
-        uint16_t* o = st.order[a] + lo;
-        size_t l = 0, r = 0;
-        for (size_t k = 0; k < count; ++k) {
-          if (st.is_left[o[k]])
-            o[l++] = o[k];
-          else
-            st.spill[r++] = o[k];
-        }
-        std::copy(st.spill, st.spill + r, o + l);
-      }
-      const uint32_t left = base + 1;
-      const uint32_t right = base + static_cast<uint32_t>(2 * best_k);
-      node.make_inner(left, right);
-      small_node(st, begin, lo, lo + best_k, left, base, left_box);
-      parent = base;
-      base = right;
-      lo += best_k;
-      box = right_box;
-    }
-  }
-
-  void make_leaf(BvhNode& node, size_t begin, size_t count) {
-    for (size_t k = 0; k < count; ++k) bvh_.ref_indices[begin + k] = work_[begin + k].id;
-    // In id order, so that the tree depends only on each node's set of references, not on
-    // the order a partition left them in (sequential and parallel partitions differ).
-    std::sort(bvh_.ref_indices.begin() + begin, bvh_.ref_indices.begin() + begin + count);
-    node.make_leaf(static_cast<uint32_t>(begin), static_cast<uint32_t>(count));
-    leaves_.fetch_add(1, std::memory_order_relaxed);
   }
 
   // The in-place partition of a large node, in parallel: fixed blocks are partitioned
@@ -450,114 +492,21 @@ class BinnedBuilder {
     return i;
   }
 
-  void build(detail::NodeRange r, uint32_t parent, Box box, CentroidBounds cb) {
-    const double c_t = config_.cost.traversal, c_i = config_.cost.intersection;
-    const size_t max_leaf = std::max<uint32_t>(1, config_.leaf.max_leaf_size);
-    for (;;) {
-      const size_t count = r.end - r.begin;
-      BvhNode& node = bvh_.nodes[r.base];
-      node.parent = parent;
-      node.set_box(box);
-      if (count == 1) return make_leaf(node, r.begin, count);
-      BinRef* refs = work_.get() + r.begin;
-
-      if (count <= exact_sweep_below_) return build_small(r.begin, count, r.base, parent, box);
-
-      // More bins where the pass over the references dwarfs the sweep over the bins, and
-      // fewer where most bins would stay empty anyway.
-      uint32_t nbins = bin_count_;
-      if (config_.refs_per_bin != 0) {
-        nbins = static_cast<uint32_t>(
-            std::clamp<size_t>(count / config_.refs_per_bin, bin_count_, std::max(bin_count_, max_bin_count_)));
-        nbins = static_cast<uint32_t>(std::min<size_t>(nbins, 4 + count / 5));
-      }
-      BinMapping mapping(cb, nbins);
-      Bins bins(nbins);
-      if (count >= config_.parallel_binning_threshold) {
-        // Min, max and integer counts merge exactly: the bins do not depend on the split.
-        bins = tbb::parallel_reduce(
-            tbb::blocked_range<size_t>(0, count, 8192), Bins(nbins),
-            [&](const tbb::blocked_range<size_t>& br, Bins acc) {
-              bin_range_two_sets(acc, mapping, refs, br.begin(), br.end());
-              return acc;
-            },
-            [](Bins a, const Bins& b) {
-              a.merge(b);
-              return a;
-            });
-      } else {
-        bin_range_two_sets(bins, mapping, refs, 0, count);
-      }
-      Split split = find_split(bins);
-
-      CentroidBounds lcb, rcb;
-      size_t left_count;
-      if (split.axis < 0) {
-        // All centroids in one bin (coincident centroids): halve the node in id order.
-        left_count = count / 2;
-        std::nth_element(refs, refs + left_count, refs + count,
-                         [](const BinRef& x, const BinRef& y) { return x.id < y.id; });
-        for (size_t k = 0; k < count; ++k) {
-          extend_box(k < left_count ? split.left : split.right, refs[k]);
-          (k < left_count ? lcb : rcb).extend(refs[k]);
-        }
-        split.cost = split.left.area() * float(left_count) + split.right.area() * float(count - left_count);
-      }
-      // A small node becomes a leaf when intersecting all of it costs no more than the split.
-      if (count <= max_leaf && c_i * node.area * double(count) <= c_t * node.area + c_i * double(split.cost))
-        return make_leaf(node, r.begin, count);
-      if (split.axis >= 0) {
-        const int axis = split.axis;
-        const uint32_t first_right = split.bin;
-        auto is_left = [&](const BinRef& x) { return mapping.bin(x, axis) < first_right; };
-        left_count = count >= config_.parallel_binning_threshold ? parallel_partition(refs, count, is_left, lcb, rcb)
-                                                                 : partition(refs, count, is_left, lcb, rcb);
-      }
-
-      const size_t mid = r.begin + left_count;
-      const uint32_t left = r.base + 1;
-      const uint32_t right = r.base + static_cast<uint32_t>(2 * left_count);
-      node.make_inner(left, right);
-      detail::NodeRange lr{r.begin, mid, left}, rr{mid, r.end, right};
-      const uint32_t me = r.base;
-      const bool left_smaller = left_count < count - left_count;
-      if (count >= config_.parallel_threshold) {
-        if (left_smaller)
-          tasks_.run([this, lr, me, b = split.left, lcb] { build(lr, me, b, lcb); });
-        else
-          tasks_.run([this, rr, me, b = split.right, rcb] { build(rr, me, b, rcb); });
-      } else {
-        if (left_smaller)
-          build(lr, me, split.left, lcb);
-        else
-          build(rr, me, split.right, rcb);
-      }
-      r = left_smaller ? rr : lr;
-      box = left_smaller ? split.right : split.left;
-      cb = left_smaller ? rcb : lcb;
-      parent = me;
-    }
-  }
-
   const PrimitiveRefs& refs_;
   const BinnedSahConfig& config_;
   Bvh& bvh_;
   const size_t n_;
-  const uint32_t bin_count_;
-  const uint32_t max_bin_count_;
-  const uint32_t exact_sweep_below_;
   std::unique_ptr<BinRef[]> work_;
-  std::atomic<size_t> leaves_{0};
-  tbb::task_group tasks_;
 };
 
 }  // namespace
 
 Bvh build_binned_sah(const PrimitiveRefs& refs, const BinnedSahConfig& config) {
+  validate(config);
   Bvh bvh;
   if (refs.empty()) return bvh;
   detail::check_reference_count(refs.size(), "binned SAH builder");
-  BinnedBuilder(refs, config, bvh).run();
+  BinnedHeuristic(refs, config, bvh).run();
   return bvh;
 }
 

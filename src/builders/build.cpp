@@ -2,16 +2,33 @@
 
 namespace bvhopt {
 
+SweepSahConfig sweep_sah_config(const BuildOptions& options) {
+  return SweepSahConfig{static_cast<const BuilderConfig&>(options), options.sweep};
+}
+
+BinnedSahConfig binned_sah_config(const BuildOptions& options) {
+  return BinnedSahConfig{static_cast<const BuilderConfig&>(options), options.binned};
+}
+
+MedianConfig median_config(const BuildOptions& options) {
+  return MedianConfig{static_cast<const BuilderConfig&>(options)};
+}
+
+void validate(const BuildOptions& options) {
+  switch (options.kind) {
+    case BuilderKind::sweep_sah: return validate(sweep_sah_config(options));
+    case BuilderKind::binned_sah: return validate(binned_sah_config(options));
+    case BuilderKind::spatial_median:
+    case BuilderKind::object_median: return validate(median_config(options));
+  }
+}
+
 Bvh build_bvh(const PrimitiveRefs& refs, const BuildOptions& options) {
   switch (options.kind) {
-    case BuilderKind::sweep_sah:
-      return build_sweep_sah(refs, SweepSahConfig{options.cost, options.leaf});
-    case BuilderKind::binned_sah:
-      return build_binned_sah(refs, BinnedSahConfig{options.cost, options.leaf, options.bin_count});
-    case BuilderKind::spatial_median:
-      return build_spatial_median(refs, MedianConfig{options.leaf});
-    case BuilderKind::object_median:
-      return build_object_median(refs, MedianConfig{options.leaf});
+    case BuilderKind::sweep_sah: return build_sweep_sah(refs, sweep_sah_config(options));
+    case BuilderKind::binned_sah: return build_binned_sah(refs, binned_sah_config(options));
+    case BuilderKind::spatial_median: return build_spatial_median(refs, median_config(options));
+    case BuilderKind::object_median: return build_object_median(refs, median_config(options));
   }
   return {};
 }

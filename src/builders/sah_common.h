@@ -11,6 +11,7 @@
 
 #include "builders/top_down.h"
 #include "bvhopt/box.h"
+#include "bvhopt/build_config.h"
 #include "bvhopt/error.h"
 #include "bvhopt/references.h"
 
@@ -23,10 +24,13 @@ inline void check_reference_count(size_t n, const char* builder) {
                 " references, more than the 2^31 - 1 a tree can hold");
 }
 
-inline Box bounds_of_ids(const PrimitiveRefs& refs, const uint32_t* ids, size_t count) {
-  Box b;
-  for (size_t i = 0; i < count; ++i) b.extend(refs.boxes[ids[i]]);
-  return b;
+// The one leaf-versus-split test of the SAH builders: a node of at most max_leaf_size
+// references becomes a leaf when intersecting all of it costs no more than the split,
+// c_I SA(N) n <= c_T SA(N) + c_I (SA(L) n_L + SA(R) n_R) with `split_cost` the bracket.
+inline bool sah_prefers_leaf(const BuilderConfig& config, float node_area, size_t count, float split_cost) {
+  const double c_t = config.cost.traversal, c_i = config.cost.intersection;
+  return count <= config.leaf.max_leaf_size &&
+         c_i * node_area * double(count) <= c_t * node_area + c_i * double(split_cost);
 }
 
 // Union of n boxes. Min and max are exact, so the result does not depend on how the

@@ -2,14 +2,14 @@
 
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_sort.h>
-#include <tbb/task_group.h>
 
 #include <algorithm>
-#include <atomic>
 #include <bit>
 #include <memory>
 
 #include "builders/sah_common.h"
+#include "builders/sorted_range_sweep.h"
+#include "builders/top_down.h"
 
 namespace bvhopt {
 namespace {
@@ -22,9 +22,15 @@ inline uint32_t orderable_bits(float f) {
   return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
 }
 
-class SweepBuilder {
+// The sweep's split search for TopDownTree: each node's references are three slices of
+// the per-axis sorted lists, which every split partitions stably.
+class SweepHeuristic {
  public:
-  SweepBuilder(const PrimitiveRefs& refs, const SweepSahConfig& config, Bvh& bvh)
+  struct Node {
+    Box box;
+  };
+
+  SweepHeuristic(const PrimitiveRefs& refs, const SweepSahConfig& config, Bvh& bvh)
       : refs_(refs), config_(config), bvh_(bvh), n_(refs.size()) {}
 
   void run() {
@@ -43,15 +49,45 @@ class SweepBuilder {
     is_left_.reset(new uint8_t[n_]);
     scratch_.reset(new Scratch[n_]);
 
-    Box root_box = detail::parallel_bounds(refs_.boxes.data(), n_);
-    build(detail::NodeRange{0, n_, 0}, kInvalidNode, root_box);
-    tasks_.wait();
-    for (auto& l : owned_lists_) l.reset();
-    is_left_.reset();
-    scratch_.reset();
-    // With leaves of several references some preallocated nodes stay unused.
-    if (2 * leaves_.load() - 1 != bvh_.nodes.size()) bvh_.renumber_depth_first();
+    detail::TopDownTree tree(bvh_);
+    tree.build(*this, detail::NodeRange{0, n_, 0}, kInvalidNode, Node{detail::parallel_bounds(refs_.boxes.data(), n_)},
+               config_.parallel_threshold);
+    tree.finish();
   }
+
+  size_t split(const detail::NodeRange& r, const BvhNode& node, const Node&, Node& left, Node& right) {
+    const size_t count = r.count();
+    // Large nodes work on their three axes at once and need two more scratch arrays
+    // while they do; freed before the children are built.
+    std::unique_ptr<Scratch[]> large;
+    Scratch* extra_storage[2] = {nullptr, nullptr};
+    Scratch** extra = nullptr;
+    if (count >= config_.parallel_split_threshold) {
+      large.reset(new Scratch[2 * count]);
+      extra_storage[0] = large.get();
+      extra_storage[1] = large.get() + count;
+      extra = extra_storage;
+    }
+
+    Split split;
+    if (centroids_coincide(r.begin, count)) {
+      // No position separates anything: halve the list (ordered by id here).
+      split.axis = 0;
+      split.left_count = count / 2;
+      const uint32_t* ids = lists_[0] + r.begin;
+      Box l = detail::bounds_of(refs_, ids, split.left_count);
+      Box rr = detail::bounds_of(refs_, ids + split.left_count, count - split.left_count);
+      split.cost = l.area() * float(split.left_count) + rr.area() * float(count - split.left_count);
+    } else {
+      split = find_split(r.begin, count, extra);
+    }
+    if (detail::sah_prefers_leaf(config_, node.area, count, split.cost)) return 0;
+    partition(r.begin, count, split, left.box, right.box, extra);
+    return split.left_count;
+  }
+
+  // The slots already hold the node's references, in x order.
+  void leaf(const detail::NodeRange&) {}
 
  private:
   // The suffix areas of a sweep and the right part of a stable partition are both
@@ -84,58 +120,31 @@ class SweepBuilder {
     float cost = 0.0f;      // A_L * n_L + A_R * n_R
   };
 
-  // Sweeps the node's three sorted lists; every position between two references is a
-  // candidate. Ties go to the more balanced split, then to the lower axis and position,
-  // so a node of coincident references is halved instead of peeled one by one.
-  // One axis of the sweep: `suffix` receives the areas right of each position. The best
-  // position by (cost, balance), the first one on exact ties.
-  Split sweep_axis(int a, size_t begin, size_t count, Scratch* suffix, size_t& best_balance) const {
+  // One axis of the sweep over the node's sorted list; `suffix` receives the areas.
+  detail::SweepCandidate sweep_axis(int a, size_t begin, size_t count, Scratch* suffix) const {
     const Box* boxes = refs_.boxes.data();
     const uint32_t* ids = lists_[a] + begin;
-    Split best;
-    best.cost = std::numeric_limits<float>::infinity();
-    best_balance = ~size_t(0);
-    Box right;
-    for (size_t k = count - 1; k > 0; --k) {
-      right.extend(boxes[ids[k]]);
-      suffix[k].area = right.area_unchecked();
-    }
-    Box left;
-    for (size_t k = 1; k < count; ++k) {
-      left.extend(boxes[ids[k - 1]]);
-      float c = left.area_unchecked() * float(k) + suffix[k].area * float(count - k);
-      if (c <= best.cost) {
-        size_t balance = k * 2 > count ? k * 2 - count : count - k * 2;
-        if (c < best.cost || balance < best_balance) {
-          best = Split{a, k, c};
-          best_balance = balance;
-        }
-      }
-    }
-    return best;
+    return detail::sweep_sorted_range(
+        count, [&](Box& b, size_t k) { b.extend(boxes[ids[k]]); }, [&](size_t k) -> float& { return suffix[k].area; });
   }
 
-  // Sweeps the node's three sorted lists; every position between two references is a
-  // candidate. Ties go to the more balanced split, then to the lower axis and position,
-  // so a node of coincident references is halved instead of peeled one by one. Large
-  // nodes sweep the three axes at once (each axis needs its own area scratch then); the
-  // per-axis winners are combined by the same rule, so the split is the same either way.
+  // Sweeps the node's three sorted lists. Large nodes sweep the three axes at once (each
+  // axis needs its own area scratch then); the per-axis winners are combined by the same
+  // rule, so the split is the same either way.
   Split find_split(size_t begin, size_t count, Scratch* extra[2]) const {
-    Split best[3];
-    size_t balance[3];
+    detail::SweepCandidate best[3];
     Scratch* suffix[3] = {scratch_.get() + begin, extra ? extra[0] : nullptr, extra ? extra[1] : nullptr};
     if (extra) {
-      tbb::parallel_invoke([&] { best[0] = sweep_axis(0, begin, count, suffix[0], balance[0]); },
-                           [&] { best[1] = sweep_axis(1, begin, count, suffix[1], balance[1]); },
-                           [&] { best[2] = sweep_axis(2, begin, count, suffix[2], balance[2]); });
+      tbb::parallel_invoke([&] { best[0] = sweep_axis(0, begin, count, suffix[0]); },
+                           [&] { best[1] = sweep_axis(1, begin, count, suffix[1]); },
+                           [&] { best[2] = sweep_axis(2, begin, count, suffix[2]); });
     } else {
-      for (int a = 0; a < 3; ++a) best[a] = sweep_axis(a, begin, count, suffix[0], balance[a]);
+      for (int a = 0; a < 3; ++a) best[a] = sweep_axis(a, begin, count, suffix[0]);
     }
     int winner = 0;
     for (int a = 1; a < 3; ++a)
-      if (best[a].cost < best[winner].cost || (best[a].cost == best[winner].cost && balance[a] < balance[winner]))
-        winner = a;
-    return best[winner];
+      if (detail::better_candidate(best[a], best[winner])) winner = a;
+    return Split{winner, best[winner].left_count, best[winner].cost};
   }
 
   // True when every centroid in the node is the same point: the first and last entries
@@ -148,14 +157,6 @@ class SweepBuilder {
     return true;
   }
 
-  void make_leaf(BvhNode& node, size_t begin, size_t count) {
-    // The slots already hold the node's references, in x order.
-    node.make_leaf(static_cast<uint32_t>(begin), static_cast<uint32_t>(count));
-    leaves_.fetch_add(1, std::memory_order_relaxed);
-  }
-
-  // Moves the left references to the front of the other two lists, keeping their sorted
-  // order (a stable partition by the per-reference side flag). Returns the child boxes.
   // Moves the left references to the front of the other two lists, keeping their sorted
   // order (a stable partition by the per-reference side flag). Returns the child boxes.
   // With `extra` (large nodes) the two sides are marked, and the two lists partitioned,
@@ -197,73 +198,6 @@ class SweepBuilder {
     }
   }
 
-  void build(detail::NodeRange r, uint32_t parent, Box box) {
-    const double c_t = config_.cost.traversal, c_i = config_.cost.intersection;
-    const size_t max_leaf = std::max<uint32_t>(1, config_.leaf.max_leaf_size);
-    for (;;) {
-      const size_t count = r.end - r.begin;
-      BvhNode& node = bvh_.nodes[r.base];
-      node.parent = parent;
-      node.set_box(box);
-      if (count == 1) return make_leaf(node, r.begin, count);
-
-      // Large nodes work on their three axes at once and need two more scratch arrays
-      // while they do; freed before the children are built.
-      std::unique_ptr<Scratch[]> large;
-      Scratch* extra_storage[2] = {nullptr, nullptr};
-      Scratch** extra = nullptr;
-      if (count >= config_.parallel_split_threshold) {
-        large.reset(new Scratch[2 * count]);
-        extra_storage[0] = large.get();
-        extra_storage[1] = large.get() + count;
-        extra = extra_storage;
-      }
-
-      Split split;
-      if (centroids_coincide(r.begin, count)) {
-        // No position separates anything: halve the list (ordered by id here).
-        split.axis = 0;
-        split.left_count = count / 2;
-        const uint32_t* ids = lists_[0] + r.begin;
-        Box l = detail::bounds_of_ids(refs_, ids, split.left_count);
-        Box rr = detail::bounds_of_ids(refs_, ids + split.left_count, count - split.left_count);
-        split.cost = l.area() * float(split.left_count) + rr.area() * float(count - split.left_count);
-      } else {
-        split = find_split(r.begin, count, extra);
-      }
-      // A small node becomes a leaf when intersecting all of it costs no more than the split.
-      if (count <= max_leaf && c_i * node.area * double(count) <= c_t * node.area + c_i * double(split.cost))
-        return make_leaf(node, r.begin, count);
-      Box left_box, right_box;
-      partition(r.begin, count, split, left_box, right_box, extra);
-      large.reset();
-
-      const size_t left_count = split.left_count;
-      const size_t mid = r.begin + left_count;
-      const uint32_t left = r.base + 1;
-      const uint32_t right = r.base + static_cast<uint32_t>(2 * left_count);
-      node.make_inner(left, right);
-      detail::NodeRange lr{r.begin, mid, left}, rr{mid, r.end, right};
-      const uint32_t me = r.base;
-      // The smaller side goes to another task; this one keeps the larger.
-      const bool left_smaller = left_count < count - left_count;
-      if (count >= config_.parallel_threshold) {
-        if (left_smaller)
-          tasks_.run([this, lr, me, left_box] { build(lr, me, left_box); });
-        else
-          tasks_.run([this, rr, me, right_box] { build(rr, me, right_box); });
-      } else {
-        if (left_smaller)
-          build(lr, me, left_box);
-        else
-          build(rr, me, right_box);
-      }
-      r = left_smaller ? rr : lr;
-      box = left_smaller ? right_box : left_box;
-      parent = me;
-    }
-  }
-
   const PrimitiveRefs& refs_;
   const SweepSahConfig& config_;
   Bvh& bvh_;
@@ -272,17 +206,16 @@ class SweepBuilder {
   std::unique_ptr<uint32_t[]> owned_lists_[2];  // storage of lists 1 and 2
   std::unique_ptr<uint8_t[]> is_left_;     // per reference id, written by its node's split
   std::unique_ptr<Scratch[]> scratch_;     // per position
-  std::atomic<size_t> leaves_{0};
-  tbb::task_group tasks_;
 };
 
 }  // namespace
 
 Bvh build_sweep_sah(const PrimitiveRefs& refs, const SweepSahConfig& config) {
+  validate(config);
   Bvh bvh;
   if (refs.empty()) return bvh;
   detail::check_reference_count(refs.size(), "sweep SAH builder");
-  SweepBuilder(refs, config, bvh).run();
+  SweepHeuristic(refs, config, bvh).run();
   return bvh;
 }
 

@@ -1,4 +1,5 @@
-// Internal: the recursion shared by the partition-based builders (binned SAH, medians).
+// Internal: the one top-down recursion every builder runs; each builder only supplies
+// its split search (a "heuristic", as in Embree's builder kernels).
 #pragma once
 
 #include <tbb/task_group.h>
@@ -13,13 +14,14 @@
 namespace bvhopt::detail {
 
 // Node numbering that needs no shared counter, so the tree is the same on any number of
-// threads: the subtree over ids[begin, end) owns nodes [base, base + 2(end - begin) - 1);
+// threads: the subtree over slots [begin, end) owns nodes [base, base + 2(end - begin) - 1);
 // its left child over [begin, mid) starts at base + 1, its right child at
 // base + 2(mid - begin). With leaves of several references some of those nodes stay
-// unused; the caller compacts the tree afterwards.
+// unused; TopDownTree::finish removes them.
 struct NodeRange {
   size_t begin, end;
   uint32_t base;
+  size_t count() const { return end - begin; }
 };
 
 inline Box bounds_of(const PrimitiveRefs& refs, const uint32_t* ids, size_t count) {
@@ -34,56 +36,74 @@ inline Box centroid_bounds_of(const PrimitiveRefs& refs, const uint32_t* ids, si
   return b;
 }
 
-// `split(ids, count, node_box)` reorders ids[0, count) and returns the size of the left
-// part, or 0 to make the node a leaf. It must be a pure function of its input.
-template <class SplitFn>
-void build_top_down(Bvh& bvh, const PrimitiveRefs& refs, const SplitFn& split, uint32_t parallel_threshold) {
-  const size_t n = refs.size();
-  bvh.nodes.assign(n == 0 ? 0 : 2 * n - 1, BvhNode{});
-  bvh.ref_indices.resize(n);
-  for (size_t i = 0; i < n; ++i) bvh.ref_indices[i] = static_cast<uint32_t>(i);
-  bvh.root = n == 0 ? kInvalidNode : 0;
-  if (n == 0) return;
+// A heuristic H provides
+//   struct Node { Box box; ... };  what a node receives from its parent: at least its box
+//   size_t split(const NodeRange&, const BvhNode&, const Node&, Node& left, Node& right);
+//       reorders the node's slots and returns how many go left, or 0 for a leaf; the
+//       children's Node states must be filled when it splits
+//   void leaf(const NodeRange&);    puts a leaf's references into its slots of ref_indices
+// and optionally
+//   bool build_subtree(TopDownTree&, const NodeRange&, uint32_t parent, const Node&);
+//       builds the whole subtree itself (for instance with another heuristic), or
+//       returns false to let split() decide.
+// Everything a heuristic computes must depend only on the node's references, so that the
+// tree is the same whichever task builds which node.
+class TopDownTree {
+ public:
+  // `bvh.nodes` must already hold 2n - 1 nodes and `bvh.ref_indices` n slots.
+  explicit TopDownTree(Bvh& bvh) : bvh_(bvh) {}
 
-  tbb::task_group tasks;
-  std::atomic<size_t> leaves{0};
-  auto recurse = [&](auto&& self, NodeRange r, uint32_t parent) -> void {
+  // Builds the subtree over `r` below `parent`. Nodes of at least `parallel_threshold`
+  // references hand their smaller child to another task.
+  template <class H>
+  void build(H& h, NodeRange r, uint32_t parent, typename H::Node state, size_t parallel_threshold) {
     for (;;) {
-      uint32_t* ids = bvh.ref_indices.data() + r.begin;
-      size_t count = r.end - r.begin;
-      BvhNode& node = bvh.nodes[r.base];
+      const size_t count = r.count();
+      BvhNode& node = bvh_.nodes[r.base];
       node.parent = parent;
-      node.set_box(bounds_of(refs, ids, count));
-      size_t left_count = count > 1 ? split(ids, count, node.box) : 0;
+      node.set_box(state.box);
+      if constexpr (requires { h.build_subtree(*this, r, parent, state); }) {
+        if (count > 1 && h.build_subtree(*this, r, parent, state)) return;
+      }
+      typename H::Node left_state, right_state;
+      const size_t left_count = count > 1 ? h.split(r, node, state, left_state, right_state) : 0;
       if (left_count == 0 || left_count >= count) {
+        h.leaf(r);
         node.make_leaf(static_cast<uint32_t>(r.begin), static_cast<uint32_t>(count));
-        leaves.fetch_add(1, std::memory_order_relaxed);
+        leaves_.fetch_add(1, std::memory_order_relaxed);
         return;
       }
-      size_t mid = r.begin + left_count;
-      uint32_t left = r.base + 1;
-      uint32_t right = r.base + static_cast<uint32_t>(2 * left_count);
-      node.make_inner(left, right);
-      NodeRange lr{r.begin, mid, left}, rr{mid, r.end, right};
-      uint32_t me = r.base;
-      // Hand the smaller side to another task and keep the larger one here.
-      if (count >= parallel_threshold) {
-        NodeRange spawned = left_count < count - left_count ? lr : rr;
-        tasks.run([&self, spawned, me] { self(self, spawned, me); });
-        r = left_count < count - left_count ? rr : lr;
-      } else {
-        self(self, lr, me);
-        r = rr;
-      }
+      const size_t mid = r.begin + left_count;
+      const uint32_t me = r.base;
+      node.make_inner(me + 1, me + static_cast<uint32_t>(2 * left_count));
+      const NodeRange lr{r.begin, mid, me + 1}, rr{mid, r.end, me + static_cast<uint32_t>(2 * left_count)};
+      // The smaller side goes to another task (or is built first); this one keeps the larger.
+      const bool left_smaller = left_count < count - left_count;
+      const NodeRange small_range = left_smaller ? lr : rr;
+      const typename H::Node& small_state = left_smaller ? left_state : right_state;
+      if (count >= parallel_threshold)
+        tasks_.run([this, &h, small_range, me, small_state, parallel_threshold] {
+          build(h, small_range, me, small_state, parallel_threshold);
+        });
+      else
+        build(h, small_range, me, small_state, parallel_threshold);
+      r = left_smaller ? rr : lr;
+      state = left_smaller ? right_state : left_state;
       parent = me;
     }
-  };
-  recurse(recurse, NodeRange{0, n, 0}, kInvalidNode);
-  tasks.wait();
-  // Boxes were set top-down from the references; inner boxes are already exact unions.
-  // The numbering is already depth-first; only leaves of several references leave
-  // unused nodes behind that compacting removes.
-  if (2 * leaves.load() - 1 != bvh.nodes.size()) bvh.renumber_depth_first();
-}
+  }
+
+  // Waits for every task. The numbering is already depth-first; only leaves of several
+  // references leave unused nodes behind, which renumbering removes.
+  void finish() {
+    tasks_.wait();
+    if (2 * leaves_.load() - 1 != bvh_.nodes.size()) bvh_.renumber_depth_first();
+  }
+
+ private:
+  Bvh& bvh_;
+  std::atomic<size_t> leaves_{0};
+  tbb::task_group tasks_;
+};
 
 }  // namespace bvhopt::detail
