@@ -50,6 +50,23 @@ TEST_F(Cli, MissingSceneNamesTheFile) {
   EXPECT_NE(r.err.find("no_such_scene.obj"), std::string::npos) << r.err;
 }
 
+// An explicit --bins holds at every node: --bins 32 differs from the adaptive default
+// (which gives large nodes more bins), and the range is the library's (2 to 128).
+TEST_F(Cli, ExplicitBinCountIsHonoured) {
+  auto cost_with = [&](const std::string& bins) {
+    CliRun r = run("build 'builtin?triangles=20000' --builder binned " + bins + " --json -o " + (dir_ / "b.bvh").string());
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return r.exit_code == 0 ? nlohmann::json::parse(r.out)["cost"].get<double>() : -1.0;
+  };
+  const double adaptive = cost_with(""), b32 = cost_with("--bins 32"), b128 = cost_with("--bins 128");
+  EXPECT_NE(adaptive, b32);
+  EXPECT_NE(b32, b128);
+  CliRun r = run("build builtin --builder binned --bins 129 -o " + (dir_ / "x.bvh").string());
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("--bins"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "x.bvh"));
+}
+
 TEST_F(Cli, UnknownBuilderIsRejected) {
   CliRun r = run("build builtin --builder fastest -o " + (dir_ / "x.bvh").string());
   EXPECT_NE(r.exit_code, 0);

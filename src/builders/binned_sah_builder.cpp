@@ -230,15 +230,9 @@ class SmallSubtreeHeuristic {
     }
     for (int a = 0; a < 3; ++a) {
       if (a == best_axis) continue;
-      uint16_t* o = order_[a] + lo;
-      size_t l = 0, rc = 0;
-      for (size_t k = 0; k < count; ++k) {
-        if (is_left_[o[k]])
-          o[l++] = o[k];
-        else
-          spill_[rc++] = o[k];
-      }
-      std::copy(spill_, spill_ + rc, o + l);
+      detail::stable_partition_by_side(
+          order_[a] + lo, count, [&](uint16_t i) { return is_left_[i] != 0; },
+          [&](size_t k) -> uint16_t& { return spill_[k]; });
     }
     return best_k;
   }

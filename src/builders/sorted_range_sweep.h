@@ -48,3 +48,23 @@ SweepCandidate sweep_sorted_range(size_t count, const Extend& extend, const Suff
 }
 
 }  // namespace bvhopt::detail
+
+namespace bvhopt::detail {
+
+// After a split on one axis, the other axes' sorted lists are filtered by side: the left
+// entries move to the front and the right ones after them, each in their sorted order.
+// `spill(k)` is a slot holding the k-th right entry meanwhile.
+template <class T, class IsLeft, class Spill>
+void stable_partition_by_side(T* list, size_t count, const IsLeft& is_left, const Spill& spill) {
+  size_t l = 0, r = 0;
+  for (size_t k = 0; k < count; ++k) {
+    const T entry = list[k];
+    if (is_left(entry))
+      list[l++] = entry;
+    else
+      spill(r++) = entry;
+  }
+  for (size_t k = 0; k < r; ++k) list[l + k] = spill(k);
+}
+
+}  // namespace bvhopt::detail

@@ -173,16 +173,9 @@ class SweepHeuristic {
       }
     };
     auto stable_partition = [&](int a, Scratch* spill) {
-      uint32_t* list = lists_[a] + begin;
-      size_t l = 0, r = 0;
-      for (size_t k = 0; k < count; ++k) {
-        uint32_t id = list[k];
-        if (is_left[id])
-          list[l++] = id;
-        else
-          spill[r++].id = id;
-      }
-      for (size_t k = 0; k < r; ++k) list[l + k] = spill[k].id;
+      detail::stable_partition_by_side(
+          lists_[a] + begin, count, [&](uint32_t id) { return is_left[id] != 0; },
+          [&](size_t k) -> uint32_t& { return spill[k].id; });
     };
     const int a1 = split.axis == 0 ? 1 : 0, a2 = split.axis == 2 ? 1 : 2;
     if (extra) {
