@@ -173,7 +173,9 @@ TEST(Rotations, RelayoutChangesNothingButMemoryOrder) {
 
 TEST(HillClimb, LeavesWithSeveralReferencesStayAsTheyAre) {
   PrimitiveRefs refs = testing::random_refs(3000, 31);
-  Bvh bvh = build_object_median(refs, MedianConfig{LeafConfig{4}});
+  MedianConfig leaves_of_four;
+  leaves_of_four.leaf.max_leaf_size = 4;
+  Bvh bvh = build_object_median(refs, leaves_of_four);
   const size_t leaves = bvh.leaf_count();
   OptimizeReport rep = hill_climb(bvh);
   ASSERT_TRUE(validate(bvh, refs).ok());
