@@ -29,7 +29,7 @@
 #include "bvhopt/build.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 
 #ifdef BVHOPT_HAVE_EMBREE
 #include <embree3/rtcore.h>

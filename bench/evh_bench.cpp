@@ -40,7 +40,7 @@
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/references.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 #include "bvhopt/tracer.h"
 
 namespace bvhopt {

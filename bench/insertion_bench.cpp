@@ -29,7 +29,7 @@
 #include "bvhopt/insertion_optimizer.h"
 #include "bvhopt/median_builder.h"
 #include "bvhopt/references.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 #include "bvhopt/sweep_sah_builder.h"
 
 namespace {

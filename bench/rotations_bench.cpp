@@ -28,7 +28,7 @@
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
 #include "bvhopt/references.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/triangle.h"
 #include "bvhopt/tree_rotations.h"

@@ -50,7 +50,7 @@
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/references.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 #include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
 

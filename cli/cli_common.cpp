@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "bvhopt/error.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 
 namespace bvhopt::cli {
 

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "bvhopt/error.h"
-#include "bvhopt/experiment.h"
+#include "experiment/experiment.h"
 #include "cli_common.h"
 #include "commands.h"
 

@@ -3,6 +3,7 @@
 #include <iostream>
 
 #include "bvhopt/images.h"
+#include "bvhopt/png_file.h"
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
 #include "cli_common.h"

@@ -6,6 +6,7 @@
 
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
+#include "bvhopt/ray_file.h"
 #include "cli_common.h"
 #include "commands.h"
 #include "trace_common.h"

@@ -1,10 +1,11 @@
 // Build a BVH over the built-in scene, optimize nothing yet, and print its SAH cost.
-#include <bvhopt/bvhopt.h>
+// Needs bvhopt::core only (no file formats).
+#include <bvhopt/core.h>
 
 #include <cstdio>
 
 int main() {
-  bvhopt::Mesh mesh = bvhopt::load_scene("builtin:atrium?triangles=20000");
+  bvhopt::Mesh mesh = bvhopt::load_builtin_scene("builtin:atrium?triangles=20000");
   bvhopt::PrimitiveRefs refs = bvhopt::make_references(mesh);
 
   bvhopt::SweepSahConfig config;   // c_T = 3, c_I = 2, one reference per leaf

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "bvhopt/error.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 #include "test_support.h"
 
 namespace bvhopt {

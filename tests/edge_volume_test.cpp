@@ -20,7 +20,7 @@
 #include "bvhopt/leaf_dedup.h"
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 #include "bvhopt/tracer.h"
 #include "bvhopt/testing/flatten_for_tracing.h"
 #include "bvhopt/validate.h"

@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "bvhopt/error.h"
-#include "bvhopt/experiment.h"
+#include "experiment/experiment.h"
 #include "test_support.h"
 
 namespace bvhopt {

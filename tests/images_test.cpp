@@ -8,6 +8,7 @@
 #include "bvhopt/build.h"
 #include "bvhopt/error.h"
 #include "bvhopt/images.h"
+#include "bvhopt/png_file.h"
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/references.h"

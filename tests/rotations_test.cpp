@@ -8,7 +8,7 @@
 
 #include "bvhopt/cost.h"
 #include "bvhopt/median_builder.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/tree_rotations.h"
 #include "bvhopt/validate.h"

@@ -11,6 +11,7 @@
 #include "bvhopt/error.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 #include "test_support.h"
 
 namespace bvhopt {

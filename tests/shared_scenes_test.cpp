@@ -12,7 +12,7 @@
 
 #include "bvhopt/median_builder.h"
 #include "bvhopt/references.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/scene_file.h"
 #include "bvhopt/validate.h"
 #include "test_support.h"
 

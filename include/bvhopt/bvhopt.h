@@ -1,40 +1,11 @@
-// Everything public, in pipeline order:
+// Everything public: bvhopt::core (bvhopt/core.h) and the file formats of bvhopt::io.
 // scene -> primitive references (optionally subdivided) -> build -> optimize -> finalize -> layout -> trace / measure / save.
 #pragma once
 
-#include "bvhopt/error.h"
-#include "bvhopt/vec3.h"
-#include "bvhopt/box.h"
-#include "bvhopt/triangle.h"
-#include "bvhopt/mesh.h"
-#include "bvhopt/scene.h"
+#include "bvhopt/core.h"
 
-#include "bvhopt/references.h"
-#include "bvhopt/edge_volume_subdivision.h"
-
-#include "bvhopt/bvh.h"
-#include "bvhopt/build.h"
-
-#include "bvhopt/optimize_report.h"
-#include "bvhopt/optimizer_config.h"
-#include "bvhopt/optimizer_method.h"
-#include "bvhopt/tree_rotations.h"
-#include "bvhopt/insertion_optimizer.h"
-
-#include "bvhopt/collapse_leaves.h"
-#include "bvhopt/leaf_dedup.h"
-#include "bvhopt/finalize.h"
-
-#include "bvhopt/cost.h"
-#include "bvhopt/stats.h"
-#include "bvhopt/validate.h"
+#include "bvhopt/scene_file.h"
 #include "bvhopt/bvh_file.h"
+#include "bvhopt/ray_file.h"
+#include "bvhopt/png_file.h"
 #include "bvhopt/atomic_file.h"
-
-#include "bvhopt/ray.h"
-#include "bvhopt/ray_sets.h"
-#include "bvhopt/ray_triangle.h"
-#include "bvhopt/binary_layout.h"
-#include "bvhopt/tracer.h"
-#include "bvhopt/ray_measure.h"
-#include "bvhopt/images.h"

@@ -1,5 +1,5 @@
 // Pictures of traversal: steps-per-pixel heat maps, an eye-light shaded image, and the
-// difference of two trees. PNG through stb_image_write.
+// difference of two trees. Written as PNG by bvhopt/png_file.h (bvhopt::io).
 #pragma once
 
 #include <cstdint>
@@ -34,7 +34,8 @@ Image shaded_image(const Mesh& mesh, const std::vector<Ray>& rays, const std::ve
 Image difference_image(const std::vector<TraceCounters>& a, const std::vector<TraceCounters>& b, uint32_t width,
                        uint32_t height, float range = 50.0f);
 
-// Through a temporary file renamed into place; throws Error naming the file on failure.
-void write_png(const std::filesystem::path& path, const Image& image);
-
 }  // namespace bvhopt
+
+// Callers written before PNG writing moved to bvhopt::io get write_png from here too; new
+// code includes bvhopt/png_file.h itself.
+#include "bvhopt/png_file.h"

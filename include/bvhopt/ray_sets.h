@@ -1,6 +1,5 @@
-// Ray sets for measuring trees: generated deterministically from a seed, saved to and
-// loaded from the binary ray file (docs/ray-file-format.md) so any tracer traces the
-// very same rays.
+// Ray sets for measuring trees, generated deterministically from a seed. The ray file that
+// saves them so any tracer traces the very same rays is in bvhopt/ray_file.h (bvhopt::io).
 #pragma once
 
 #include <cstdint>
@@ -85,14 +84,8 @@ struct RaySet {
 // tracer is used to find the hits that ao, shadow and path rays start from.
 RaySet make_ray_set(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& config);
 
-// The ray file (docs/ray-file-format.md). write_ray_file writes a temporary file beside
-// `path` and renames it into place; on failure the temporary is removed and Error thrown.
-void write_ray_file(const std::filesystem::path& path, const RaySet& set);
-// Throws Error naming the file and the problem: missing, too short, wrong magic, newer
-// version, unknown kind or query, truncated or trailing bytes, checksum mismatch, or a
-// ray that cannot be traced (non-finite numbers, zero direction, tmin > tmax).
-RaySet read_ray_file(const std::filesystem::path& path);
-
-inline constexpr uint32_t kRayFileVersion = 1;
-
 }  // namespace bvhopt
+
+// Callers written before the ray file moved to bvhopt::io get its functions from here too;
+// new code includes bvhopt/ray_file.h itself.
+#include "bvhopt/ray_file.h"

@@ -1,19 +1,13 @@
-// Scenes: files read through assimp, or the procedural built-in scene.
+// Scenes: the procedural built-in scene (bvhopt::core). Files are read through assimp by
+// bvhopt/scene_file.h (bvhopt::io).
 #pragma once
 
 #include <cstdint>
-#include <filesystem>
 #include <string>
 
 #include "bvhopt/mesh.h"
 
 namespace bvhopt {
-
-// Reads any format assimp reads (OBJ, PLY, glTF/GLB, FBX, ...): polygons are triangulated,
-// node transforms applied (instances flattened) and all meshes merged into one list, in
-// the order assimp gives them. Throws Error for a missing file, an unknown or corrupt
-// format, an empty scene, or bad numbers (see check_mesh).
-Mesh load_mesh_file(const std::filesystem::path& path);
 
 // The built-in scene: an architectural interior (walls, floors, vaults, stairs, columns,
 // chairs, tables, plants, long thin slabs rotated off the axes). Deterministic in `seed`;
@@ -24,11 +18,18 @@ struct BuiltinSceneConfig {
 };
 Mesh make_builtin_scene(const BuiltinSceneConfig& config = {});
 
-// A scene by name, as the command line takes it:
-//   "path/to/file.obj"                       a file
-//   "builtin" or "builtin:atrium"            the built-in scene, default size
+// Whether `spec` names the built-in scene: "builtin" followed by nothing, ':' or '?'
+// (anything else, say a file called builtin.obj, is a path).
+bool is_builtin_scene_spec(const std::string& spec);
+
+// The built-in scene by name, as the command line takes it:
+//   "builtin" or "builtin:atrium"              default size
 //   "builtin:atrium?triangles=1000000&seed=7"  with options
-// Throws Error for anything else.
-Mesh load_scene(const std::string& spec);
+// Throws Error for an unknown scene or option, or a bad number.
+Mesh load_builtin_scene(const std::string& spec);
 
 }  // namespace bvhopt
+
+// Callers written before file loading moved to bvhopt::io get load_scene and load_mesh_file
+// from here too; new code includes bvhopt/scene_file.h itself.
+#include "bvhopt/scene_file.h"

@@ -1,17 +1,12 @@
-// Heat maps and shaded images, written as PNG by stb_image_write (implementation in libstb).
+// Heat maps, shaded images and difference images (written as PNG by src/io/png_file.cpp).
 #include "bvhopt/images.h"
 
-
-#include <stb/stb_image_write.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <string>
-#include <system_error>
 
 #include "bvhopt/error.h"
-#include "bvhopt/atomic_file.h"
 
 namespace bvhopt {
 namespace {
@@ -79,15 +74,6 @@ Image difference_image(const std::vector<TraceCounters>& a, const std::vector<Tr
     }
   }
   return img;
-}
-
-void write_png(const std::filesystem::path& path, const Image& image) {
-  if (image.width == 0 || image.height == 0 || image.rgb.size() != size_t(image.width) * image.height * 3)
-    throw Error(path.string() + ": cannot write an empty or malformed image");
-  write_atomically(path, [&](const std::filesystem::path& tmp) {
-    if (!stbi_write_png(tmp.c_str(), int(image.width), int(image.height), 3, image.rgb.data(), int(image.width * 3)))
-      throw Error(path.string() + ": PNG write failed (no permission, missing folder or disk full?)");
-  });
 }
 
 }  // namespace bvhopt

@@ -1,4 +1,4 @@
-// Scene specs as the command line takes them: a file, or the built-in scene with options.
+// The built-in scene's spec, "builtin[:atrium][?triangles=N&seed=S]", as the command line takes it.
 #include <charconv>
 #include <string>
 #include <string_view>
@@ -26,7 +26,11 @@ uint64_t parse_number(const std::string& spec, std::string_view key, std::string
   return value;
 }
 
-Mesh load_builtin(const std::string& spec) {
+}  // namespace
+
+Mesh load_builtin_scene(const std::string& spec) {
+  if (!is_builtin_scene_spec(spec))
+    throw Error(spec + ": not the built-in scene (expected builtin[:atrium][?triangles=N&seed=S])");
   std::string_view rest = std::string_view(spec).substr(kBuiltin.size());
   std::string_view name = "atrium";
   std::string_view options;
@@ -72,16 +76,9 @@ Mesh load_builtin(const std::string& spec) {
   return mesh;
 }
 
-}  // namespace
-
-Mesh load_scene(const std::string& spec) {
-  if (spec.empty()) throw Error("scene: empty name (expected a file or builtin[:atrium][?triangles=N&seed=S])");
-  // "builtin" followed by nothing, ':' or '?' is the generator; anything else (say a file
-  // called builtin.obj) is a path.
-  if (spec.compare(0, kBuiltin.size(), kBuiltin) == 0 &&
-      (spec.size() == kBuiltin.size() || spec[kBuiltin.size()] == ':' || spec[kBuiltin.size()] == '?'))
-    return load_builtin(spec);
-  return load_mesh_file(spec);
+bool is_builtin_scene_spec(const std::string& spec) {
+  return spec.compare(0, kBuiltin.size(), kBuiltin) == 0 &&
+         (spec.size() == kBuiltin.size() || spec[kBuiltin.size()] == ':' || spec[kBuiltin.size()] == '?');
 }
 
 }  // namespace bvhopt

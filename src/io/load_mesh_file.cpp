@@ -1,0 +1,142 @@
+// Scene files through assimp: every mesh of every node, transformed and merged.
+#include <assimp/Importer.hpp>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <system_error>
+#include <vector>
+
+#include "bvhopt/error.h"
+#include "bvhopt/scene_file.h"
+#include "io/ply_precheck.h"
+
+namespace bvhopt {
+
+namespace {
+
+// Assimp's error strings sometimes end in a newline or are empty; the message we throw
+// should read as one line.
+std::string clean_assimp_error(const char* text) {
+  std::string s = text ? text : "";
+  while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
+  return s.empty() ? std::string("unknown assimp error") : s;
+}
+
+}  // namespace
+
+Mesh load_mesh_file(const std::filesystem::path& path) {
+  const std::string where = path.string();
+  std::error_code ec;
+  const auto status = std::filesystem::status(path, ec);
+  if (ec || !std::filesystem::exists(status)) throw Error(where + ": no such file");
+  if (std::filesystem::is_directory(status)) throw Error(where + ": is a directory, not a scene file");
+  if (std::filesystem::file_size(path, ec) == 0 && !ec) throw Error(where + ": empty file");
+
+  check_ply(path, where);
+
+  Assimp::Importer importer;
+  // Only positions are used: dropping normals, texture coordinates and the like before the
+  // post-processing steps keeps loading fast and memory small.
+  importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS, aiComponent_NORMALS | aiComponent_TANGENTS_AND_BITANGENTS |
+                                                          aiComponent_COLORS | aiComponent_TEXCOORDS |
+                                                          aiComponent_BONEWEIGHTS | aiComponent_ANIMATIONS |
+                                                          aiComponent_TEXTURES | aiComponent_LIGHTS |
+                                                          aiComponent_CAMERAS | aiComponent_MATERIALS);
+  // No aiProcess_FindDegenerates: zero-area triangles are part of the input (conference.obj
+  // has 52,670) and must be kept and counted, not removed.
+  const unsigned flags = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_RemoveComponent | aiProcess_JoinIdenticalVertices;
+  // Read first and post-process second, so that a file with no faces gets our "no
+  // triangles" rather than an error from a post-processing step about orphaned meshes.
+  const aiScene* scene = importer.ReadFile(where, 0);
+  if (!scene) {
+    const std::string ext = path.extension().string();
+    if (!importer.IsExtensionSupported(ext.empty() ? std::string(".") : ext))
+      throw Error(where + ": unknown file format " + (ext.empty() ? std::string("(no extension)") : "'" + ext + "'") +
+                  " (" + clean_assimp_error(importer.GetErrorString()) + ")");
+    throw Error(where + ": cannot read: " + clean_assimp_error(importer.GetErrorString()));
+  }
+  if (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE)
+    throw Error(where + ": incomplete scene (the file is truncated or corrupt, or not a " +
+                path.extension().string() + " file)");
+  bool any_face = false;
+  for (unsigned m = 0; m < scene->mNumMeshes && !any_face; ++m)
+    for (unsigned f = 0; f < scene->mMeshes[m]->mNumFaces && !any_face; ++f)
+      any_face = scene->mMeshes[m]->mFaces[f].mNumIndices >= 3;
+  if (!any_face) throw Error(where + ": no triangles (the file holds no polygon faces)");
+  // Bad numbers must be caught before post-processing: JoinIdenticalVertices compares with
+  // NaN, finds no difference and would quietly weld a NaN vertex onto a good one, and
+  // every step trusts the face indices.
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh* mesh = scene->mMeshes[m];
+    const std::string mesh_name =
+        "mesh " + std::to_string(m) + (mesh->mName.length ? " '" + std::string(mesh->mName.C_Str()) + "'" : "");
+    for (unsigned v = 0; v < mesh->mNumVertices; ++v)
+      for (int axis = 0; axis < 3; ++axis) {
+        const float c = mesh->mVertices[v][axis];
+        if (!std::isfinite(c))
+          throw Error(where + ": " + mesh_name + ", vertex " + std::to_string(v) + ": coordinate " + "xyz"[axis] +
+                      " is " + (std::isnan(c) ? "NaN" : "infinite"));
+      }
+    for (unsigned f = 0; f < mesh->mNumFaces; ++f)
+      for (unsigned k = 0; k < mesh->mFaces[f].mNumIndices; ++k)
+        if (mesh->mFaces[f].mIndices[k] >= mesh->mNumVertices)
+          throw Error(where + ": " + mesh_name + ", face " + std::to_string(f) + ": vertex index " +
+                      std::to_string(mesh->mFaces[f].mIndices[k]) + " out of range (" +
+                      std::to_string(mesh->mNumVertices) + " vertices)");
+  }
+  scene = importer.ApplyPostProcessing(flags);
+  if (!scene) throw Error(where + ": cannot process: " + clean_assimp_error(importer.GetErrorString()));
+
+  size_t vertex_total = 0, triangle_total = 0;
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh* mesh = scene->mMeshes[m];
+    vertex_total += mesh->mNumVertices;
+    for (unsigned f = 0; f < mesh->mNumFaces; ++f) triangle_total += mesh->mFaces[f].mNumIndices == 3;
+  }
+  if (triangle_total == 0) throw Error(where + ": no triangles (the file holds no polygon faces)");
+  if (vertex_total > std::numeric_limits<uint32_t>::max())
+    throw Error(where + ": " + std::to_string(vertex_total) + " vertices, more than 32-bit indices can address");
+
+  Mesh out;
+  out.name = path.filename().string();
+  out.positions.resize(3 * vertex_total);
+  out.indices.reserve(3 * triangle_total);
+  size_t base = 0;
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh* mesh = scene->mMeshes[m];
+    float* dst = out.positions.data() + 3 * base;
+    for (unsigned v = 0; v < mesh->mNumVertices; ++v) {
+      dst[3 * v] = static_cast<float>(mesh->mVertices[v].x);
+      dst[3 * v + 1] = static_cast<float>(mesh->mVertices[v].y);
+      dst[3 * v + 2] = static_cast<float>(mesh->mVertices[v].z);
+    }
+    for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
+      const aiFace& face = mesh->mFaces[f];
+      // Points and lines (fewer than three indices) are not surfaces: skipped. After
+      // aiProcess_Triangulate nothing has more than three.
+      if (face.mNumIndices != 3) continue;
+      for (int k = 0; k < 3; ++k) {
+        const unsigned i = face.mIndices[k];
+        if (i >= mesh->mNumVertices)
+          throw Error(where + ": mesh " + std::to_string(m) + ", face " + std::to_string(f) + ": vertex index " +
+                      std::to_string(i) + " out of range (" + std::to_string(mesh->mNumVertices) + " vertices)");
+        out.indices.push_back(static_cast<uint32_t>(base + i));
+      }
+    }
+    base += mesh->mNumVertices;
+  }
+  check_mesh(out);
+  return out;
+}
+
+}  // namespace bvhopt

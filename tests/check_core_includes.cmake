@@ -1,0 +1,33 @@
+# Fails when a source of bvhopt::core, or any public header, includes a header of the file
+# formats' libraries (assimp, stb, nlohmann-json), or when a library source runs a program
+# (std::system, popen): those belong to bvhopt::io and the command-line program.
+# cmake -DSOURCE_DIR=<project> "-DFOLDERS=scene;references;..." -P check_core_includes.cmake
+set(globs ${SOURCE_DIR}/include/bvhopt/*.h)
+foreach(folder ${FOLDERS})
+  list(APPEND globs ${SOURCE_DIR}/src/${folder}/*.cpp ${SOURCE_DIR}/src/${folder}/*.h)
+endforeach()
+file(GLOB_RECURSE core_files ${globs})
+file(GLOB library_files ${SOURCE_DIR}/src/*/*.cpp ${SOURCE_DIR}/src/*/*.h)
+list(LENGTH core_files count)
+if(count LESS 20)
+  message(FATAL_ERROR "only ${count} core files found under ${SOURCE_DIR}: wrong SOURCE_DIR or FOLDERS?")
+endif()
+
+set(bad)
+foreach(file ${core_files})
+  file(STRINGS ${file} lines REGEX "^[ \t]*#[ \t]*include[ \t]*[<\"](assimp/|stb/|stb_|nlohmann/)")
+  foreach(line ${lines})
+    list(APPEND bad "${file}: ${line}")
+  endforeach()
+endforeach()
+foreach(file ${library_files})
+  file(STRINGS ${file} lines REGEX "std::system[ \t]*\\(|[^a-z_]popen[ \t]*\\(")
+  foreach(line ${lines})
+    list(APPEND bad "${file}: runs a program: ${line}")
+  endforeach()
+endforeach()
+if(bad)
+  list(JOIN bad "\n" text)
+  message(FATAL_ERROR "bvhopt::core must not depend on the file formats' libraries, and no library may run programs:\n${text}")
+endif()
+message(STATUS "${count} core files checked")
