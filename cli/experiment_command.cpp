@@ -99,6 +99,52 @@ std::string clock_text(double seconds) {
   return buf;
 }
 
+// The run's settings from the options; an explicit --time-budget or --rays wins over --quick's.
+ExperimentConfig experiment_config(const ExperimentOptions& opt, bool budget_given, bool rays_given) {
+  if (opt.out.empty()) throw Error("experiment: --out DIR is required");
+  ExperimentConfig config;
+  if (!opt.scenes_dir.empty()) config.scenes = scenes_in(opt.scenes_dir);
+  for (const std::string& s : opt.scenes) config.scenes.push_back(s);
+  if (config.scenes.empty()) throw Error("experiment: give --scenes DIR or --scene FILE");
+  config.seed = opt.seed;
+  config.rays = opt.rays;
+  if (opt.quick) config = quick_experiment_config(config);
+  if (budget_given || !opt.quick) config.time_budget = opt.time_budget;
+  if (rays_given) config.rays = opt.rays;
+  if (!opt.shard.empty()) parse_shard(opt.shard, config.shard_index, config.shard_count);
+  config.plot_script = find_plot_script(opt.plot_script);
+  return config;
+}
+
+void run_experiment_command(const ExperimentOptions& opt, bool budget_given, bool rays_given) {
+  ExperimentConfig config = experiment_config(opt, budget_given, rays_given);
+  auto limit = opt.threads.apply();
+  config.threads = opt.threads.effective();
+
+  ProgressLine progress;
+  std::string last_step;
+  config.on_progress = [&](const ExperimentProgress& p) {
+    std::string text = "[" + std::to_string(p.task) + "/" + std::to_string(p.task_count) + "] " + p.scene + ": " + p.step;
+    if (p.pass > 0) text += ", pass " + std::to_string(p.pass);
+    text += "  elapsed " + clock_text(p.elapsed) + ", remaining ~" + clock_text(p.remaining);
+    progress.update(text, p.step != last_step);
+    last_step = p.step;
+  };
+  Stopwatch watch;
+  run_experiment(config, opt.out);
+  progress.finish();
+  std::cout << "experiment: " << config.scenes.size() << " scenes";
+  if (config.shard_count > 1) std::cout << " (shard " << config.shard_index + 1 << "/" << config.shard_count << ")";
+  std::cout << " in " << format_double(watch.seconds(), 1) << " s; report: "
+            << (fs::path(opt.out) / "report.md").string() << "\n";
+}
+
+void run_merge_command(const ExperimentOptions& opt) {
+  std::vector<fs::path> parts(opt.merge_dirs.begin(), opt.merge_dirs.end());
+  merge_experiments(parts, opt.merge_out, find_plot_script(opt.plot_script));
+  std::cout << "merged " << parts.size() << " parts into " << (fs::path(opt.merge_out) / "report.md").string() << "\n";
+}
+
 }  // namespace
 
 void register_experiment_command(CLI::App& app) {
@@ -124,46 +170,10 @@ void register_experiment_command(CLI::App& app) {
   merge->add_option("dirs", opt->merge_dirs, "Shard output folders")->required()->check(CLI::ExistingDirectory);
   merge->add_option("--out", opt->merge_out, "Output folder")->required()->type_name("DIR");
   merge->add_option("--plot-script", opt->plot_script, "The plotting script");
-  merge->callback([opt] {
-    std::vector<fs::path> parts(opt->merge_dirs.begin(), opt->merge_dirs.end());
-    merge_experiments(parts, opt->merge_out, find_plot_script(opt->plot_script));
-    std::cout << "merged " << parts.size() << " parts into " << (fs::path(opt->merge_out) / "report.md").string() << "\n";
-  });
-
+  merge->callback([opt] { run_merge_command(*opt); });
   cmd->callback([opt, cmd, merge] {
     if (merge->parsed()) return;
-    if (opt->out.empty()) throw Error("experiment: --out DIR is required");
-    ExperimentConfig config;
-    if (!opt->scenes_dir.empty()) config.scenes = scenes_in(opt->scenes_dir);
-    for (const std::string& s : opt->scenes) config.scenes.push_back(s);
-    if (config.scenes.empty()) throw Error("experiment: give --scenes DIR or --scene FILE");
-    config.seed = opt->seed;
-    config.rays = opt->rays;
-    if (opt->quick) config = quick_experiment_config(config);
-    // An explicit budget wins over --quick's.
-    if (cmd->count("--time-budget") > 0 || !opt->quick) config.time_budget = opt->time_budget;
-    if (cmd->count("--rays") > 0) config.rays = opt->rays;
-    if (!opt->shard.empty()) parse_shard(opt->shard, config.shard_index, config.shard_count);
-    auto limit = opt->threads.apply();
-    config.threads = opt->threads.effective();
-    config.plot_script = find_plot_script(opt->plot_script);
-
-    ProgressLine progress;
-    std::string last_step;
-    config.on_progress = [&](const ExperimentProgress& p) {
-      std::string text = "[" + std::to_string(p.task) + "/" + std::to_string(p.task_count) + "] " + p.scene + ": " + p.step;
-      if (p.pass > 0) text += ", pass " + std::to_string(p.pass);
-      text += "  elapsed " + clock_text(p.elapsed) + ", remaining ~" + clock_text(p.remaining);
-      progress.update(text, p.step != last_step);
-      last_step = p.step;
-    };
-    Stopwatch watch;
-    run_experiment(config, opt->out);
-    progress.finish();
-    std::cout << "experiment: " << config.scenes.size() << " scenes";
-    if (config.shard_count > 1) std::cout << " (shard " << config.shard_index + 1 << "/" << config.shard_count << ")";
-    std::cout << " in " << format_double(watch.seconds(), 1) << " s; report: "
-              << (fs::path(opt->out) / "report.md").string() << "\n";
+    run_experiment_command(*opt, cmd->count("--time-budget") > 0, cmd->count("--rays") > 0);
   });
 }
 

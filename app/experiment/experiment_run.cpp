@@ -289,8 +289,117 @@ void write_heatmap(const Tracer& tracer, const RaySet& camera_rays, const fs::pa
 }
 
 // Kensler's Table 1 and Figures 3-4, Bittner's Table 1 and Figure 7, on one scene.
+// The ray sets of the optimizer tables, and the camera rays of the heat maps, made from the
+// SAH tree: the rays depend on the mesh and seed only.
+struct TableRays {
+  RaySets tables;
+  RaySet heat;
+};
+
+TableRays make_table_rays(const ExperimentConfig& cfg, const Mesh& mesh, const Tracer& sah_tracer) {
+  TableRays rays;
+  for (RayKind kind : kTableRayKinds) {
+    RaySetConfig rc;
+    rc.kind = kind;
+    rc.seed = cfg.seed;
+    rc.count = cfg.rays;
+    rays.tables.sets.push_back(make_ray_set(mesh, sah_tracer, rc));
+  }
+  RaySetConfig hc;
+  hc.kind = RayKind::primary;
+  hc.seed = cfg.seed;
+  hc.width = cfg.heatmap_width;
+  hc.height = cfg.heatmap_height;
+  hc.count = static_cast<uint64_t>(cfg.heatmap_width) * cfg.heatmap_height;
+  rays.heat = make_ray_set(mesh, sah_tracer, hc);
+  return rays;
+}
+
+// The optimized trees of one scene, kept for tracing, and their entries in results.json.
+struct OptimizedTrees {
+  json& det;
+  json& timing;
+  std::vector<std::pair<std::string, Bvh>> trees;
+
+  void record(const std::string& key, Bvh tree, const OptimizeReport& rep, double secs) {
+    det["trees"][key] = tree_det(tree);
+    det["trees"][key]["passes"] = rep.passes;
+    det["trees"][key]["moves"] = rep.moves;
+    det["trees"][key]["stop_reason"] = std::string(stop_reason_name(rep.stop_reason));
+    det["traces"][key] = trace_costs(rep);
+    timing["traces"][key] = trace_seconds(rep);
+    timing["trees"][key]["optimize_seconds"] = secs;
+    trees.emplace_back(key, std::move(tree));
+  }
+};
+
+// Hill climbing: until no pass improves.
+void run_hill_climb(Runner& run, const Bvh& sah, OptimizedTrees& out) {
+  Bvh tree = sah;
+  HillClimbConfig hc_cfg;
+  hc_cfg.limits.on_pass = [&](const PassRecord& p) { run.step("hill climbing", 0.15, p.pass); };
+  const auto t0 = Clock::now();
+  OptimizeReport rep = hill_climb(tree, hc_cfg);
+  out.record("hill", std::move(tree), rep, seconds_since(t0));
+}
+
+// Kensler's schedule scaled down to the budget (see ExperimentConfig::time_budget), described
+// in `schedule` for the report.
+AnnealConfig budgeted_anneal_config(const ExperimentConfig& cfg, size_t inner_count, json& schedule) {
+  AnnealConfig ac;
+  ac.seed = cfg.seed;
+  const double inner = static_cast<double>(std::max<size_t>(1, inner_count));
+  const double full_estimate = ac.schedule_passes * inner * cfg.anneal_seconds_per_node_pass;
+  const double allotted = cfg.time_budget * cfg.anneal_budget_fraction;
+  bool scaled = false;
+  if (cfg.time_budget > 0.0 && full_estimate > allotted) {
+    const double passes = std::floor(allotted / (inner * cfg.anneal_seconds_per_node_pass));
+    const uint32_t n = static_cast<uint32_t>(std::clamp(passes, 8.0, static_cast<double>(ac.schedule_passes)));
+    ac.period = std::max<uint32_t>(2, static_cast<uint32_t>(std::lround(50.0 * n / ac.schedule_passes)));
+    ac.schedule_passes = n;
+    scaled = true;
+  }
+  // A safety net only: a machine many times slower than the calibration stops here, and
+  // the report shows the stop reason (then the costs are no longer machine-independent).
+  if (cfg.time_budget > 0.0) ac.limits.time_limit = 4.0 * std::max(allotted, 1.0);
+  schedule = {{"passes", ac.schedule_passes}, {"period", ac.period}, {"h", ac.h},
+              {"scaled_by_budget", scaled}, {"paper_passes", 1250}, {"paper_period", 50},
+              {"estimated_full_seconds", full_estimate}};
+  return ac;
+}
+
+void run_anneal(Runner& run, const Bvh& sah, OptimizedTrees& out) {
+  AnnealConfig ac = budgeted_anneal_config(run.config(), sah.inner_count(), out.det["anneal_schedule"]);
+  const uint32_t total = ac.schedule_passes;
+  ac.limits.on_pass = [&](const PassRecord& p) {
+    run.step("annealing", 0.2 + 0.5 * std::min(1.0, double(p.pass) / total), p.pass);
+  };
+  Bvh tree = sah;
+  const auto t0 = Clock::now();
+  OptimizeReport rep = anneal(tree, ac);
+  out.record("anneal", std::move(tree), rep, seconds_since(t0));
+  json temps = json::array();
+  for (const PassRecord& p : rep.trace) temps.push_back(p.temperature);
+  out.det["traces"]["anneal_temperature"] = temps;
+}
+
+// Insertion from the SAH tree and from the spatial-median tree (Bittner's defaults).
+void run_insertion(Runner& run, const Bvh& sah, const Bvh& median, OptimizedTrees& out) {
+  for (const auto& [key, start, label] :
+       {std::tuple<const char*, const Bvh*, const char*>{"insertion_sah", &sah, "insertion (SAH)"},
+        std::tuple<const char*, const Bvh*, const char*>{"insertion_median", &median, "insertion (median)"}}) {
+    Bvh tree = *start;
+    InsertionConfig ic;
+    ic.seed = run.config().seed;
+    const std::string step_label = label;
+    ic.limits.on_pass = [&](const PassRecord& p) { run.step(step_label, 0.75, p.pass); };
+    const auto t0 = Clock::now();
+    OptimizeReport rep = optimize_insertion(tree, ic);
+    out.record(key, std::move(tree), rep, seconds_since(t0));
+  }
+}
+
 json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, const fs::path& out) {
-  const ExperimentConfig& cfg = run.config();
   json det, timing;
   det["triangles"] = mesh.triangle_count();
   const PrimitiveRefs refs = make_references(mesh);
@@ -308,25 +417,9 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
   const Bvh median = build_bvh(refs, med_opts);
   timing["build_seconds"]["median"] = seconds_since(t0);
 
-  // Ray sets from the SAH tree: the rays depend on the mesh and seed only.
   run.step("ray sets", 0.06);
-  const Tracer sah_tracer = make_tracer(sah, refs, mesh);
-  RaySets rays;
-  for (RayKind kind : kTableRayKinds) {
-    RaySetConfig rc;
-    rc.kind = kind;
-    rc.seed = cfg.seed;
-    rc.count = cfg.rays;
-    rays.sets.push_back(make_ray_set(mesh, sah_tracer, rc));
-  }
-  RaySetConfig hc;
-  hc.kind = RayKind::primary;
-  hc.seed = cfg.seed;
-  hc.width = cfg.heatmap_width;
-  hc.height = cfg.heatmap_height;
-  hc.count = static_cast<uint64_t>(cfg.heatmap_width) * cfg.heatmap_height;
-  const RaySet heat_rays = make_ray_set(mesh, sah_tracer, hc);
-  for (const RaySet& s : rays.sets) det["ray_counts"][std::string(ray_kind_name(s.kind))] = s.rays.size();
+  const TableRays rays = make_table_rays(run.config(), mesh, make_tracer(sah, refs, mesh));
+  for (const RaySet& s : rays.tables.sets) det["ray_counts"][std::string(ray_kind_name(s.kind))] = s.rays.size();
 
   json& trees = det["trees"];
   json& ttimes = timing["trees"];
@@ -335,77 +428,10 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
   trees["median"] = tree_det(median);
   ttimes["median"]["optimize_seconds"] = 0.0;
 
-  std::vector<std::pair<std::string, Bvh>> optimized;
-  auto record = [&](const std::string& key, const Bvh& tree, const OptimizeReport& rep, double secs) {
-    trees[key] = tree_det(tree);
-    trees[key]["passes"] = rep.passes;
-    trees[key]["moves"] = rep.moves;
-    trees[key]["stop_reason"] = std::string(stop_reason_name(rep.stop_reason));
-    det["traces"][key] = trace_costs(rep);
-    timing["traces"][key] = trace_seconds(rep);
-    ttimes[key]["optimize_seconds"] = secs;
-  };
-
-  // Hill climbing: until no pass improves.
-  {
-    Bvh tree = sah;
-    HillClimbConfig hc_cfg;
-    hc_cfg.limits.on_pass = [&](const PassRecord& p) { run.step("hill climbing", 0.15, p.pass); };
-    t0 = Clock::now();
-    OptimizeReport rep = hill_climb(tree, hc_cfg);
-    record("hill", tree, rep, seconds_since(t0));
-    optimized.emplace_back("hill", std::move(tree));
-  }
-
-  // Annealing, the schedule scaled down to the budget (see ExperimentConfig::time_budget).
-  {
-    AnnealConfig ac;
-    ac.seed = cfg.seed;
-    const double inner = static_cast<double>(std::max<size_t>(1, sah.inner_count()));
-    const double full_estimate = ac.schedule_passes * inner * cfg.anneal_seconds_per_node_pass;
-    const double allotted = cfg.time_budget * cfg.anneal_budget_fraction;
-    bool scaled = false;
-    if (cfg.time_budget > 0.0 && full_estimate > allotted) {
-      const double passes = std::floor(allotted / (inner * cfg.anneal_seconds_per_node_pass));
-      const uint32_t n = static_cast<uint32_t>(std::clamp(passes, 8.0, static_cast<double>(ac.schedule_passes)));
-      ac.period = std::max<uint32_t>(2, static_cast<uint32_t>(std::lround(50.0 * n / ac.schedule_passes)));
-      ac.schedule_passes = n;
-      scaled = true;
-    }
-    // A safety net only: a machine many times slower than the calibration stops here, and
-    // the report shows the stop reason (then the costs are no longer machine-independent).
-    if (cfg.time_budget > 0.0) ac.limits.time_limit = 4.0 * std::max(allotted, 1.0);
-    det["anneal_schedule"] = {{"passes", ac.schedule_passes}, {"period", ac.period}, {"h", ac.h},
-                              {"scaled_by_budget", scaled}, {"paper_passes", 1250}, {"paper_period", 50},
-                              {"estimated_full_seconds", full_estimate}};
-    const uint32_t total = ac.schedule_passes;
-    ac.limits.on_pass = [&](const PassRecord& p) {
-      run.step("annealing", 0.2 + 0.5 * std::min(1.0, double(p.pass) / total), p.pass);
-    };
-    Bvh tree = sah;
-    t0 = Clock::now();
-    OptimizeReport rep = anneal(tree, ac);
-    record("anneal", tree, rep, seconds_since(t0));
-    json temps = json::array();
-    for (const PassRecord& p : rep.trace) temps.push_back(p.temperature);
-    det["traces"]["anneal_temperature"] = temps;
-    optimized.emplace_back("anneal", std::move(tree));
-  }
-
-  // Insertion from the SAH tree and from the spatial-median tree (Bittner's defaults).
-  for (const auto& [key, start, label] :
-       {std::tuple<const char*, const Bvh*, const char*>{"insertion_sah", &sah, "insertion (SAH)"},
-        std::tuple<const char*, const Bvh*, const char*>{"insertion_median", &median, "insertion (median)"}}) {
-    Bvh tree = *start;
-    InsertionConfig ic;
-    ic.seed = cfg.seed;
-    const std::string step_label = label;
-    t0 = Clock::now();
-    ic.limits.on_pass = [&](const PassRecord& p) { run.step(step_label, 0.75, p.pass); };
-    OptimizeReport rep = optimize_insertion(tree, ic);
-    record(key, tree, rep, seconds_since(t0));
-    optimized.emplace_back(key, std::move(tree));
-  }
+  OptimizedTrees optimized{det, timing, {}};
+  run_hill_climb(run, sah, optimized);
+  run_anneal(run, sah, optimized);
+  run_insertion(run, sah, median, optimized);
 
   // Ray measurements of all six trees together; heat maps of the SAH tree and the best one.
   std::string best_key = "sah";
@@ -413,7 +439,7 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
   std::vector<TracedTree> traced;
   traced.push_back({"sah", make_tracer(sah, refs, mesh)});
   traced.push_back({"median", make_tracer(median, refs, mesh)});
-  for (auto& [key, tree] : optimized) {
+  for (auto& [key, tree] : optimized.trees) {
     traced.push_back({key, make_tracer(tree, refs, mesh)});
     const double c = trees[key]["cost"].get<double>();
     if (c < best_cost) {
@@ -421,14 +447,14 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
       best_key = key;
     }
   }
-  measure_trees(run, traced, rays, trees, ttimes);
+  measure_trees(run, traced, rays.tables, trees, ttimes);
   run.step("heat maps", 0.98);
   det["best_tree"] = best_key;
   const std::string heat_sah = "heat_" + name + "_sah.png";
   const std::string heat_best = "heat_" + name + "_best.png";
   for (const TracedTree& t : traced) {
-    if (t.key == "sah") write_heatmap(t.tracer, heat_rays, out / heat_sah);
-    if (t.key == best_key) write_heatmap(t.tracer, heat_rays, out / heat_best);
+    if (t.key == "sah") write_heatmap(t.tracer, rays.heat, out / heat_sah);
+    if (t.key == best_key) write_heatmap(t.tracer, rays.heat, out / heat_best);
   }
   return json{{"det", det}, {"timing", timing}, {"images", {heat_sah, heat_best}}};
 }
