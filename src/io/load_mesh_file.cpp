@@ -3,18 +3,12 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
-#include <cctype>
-#include <charconv>
 #include <cmath>
 #include <cstdint>
-#include <fstream>
-#include <iterator>
+#include <filesystem>
 #include <limits>
-#include <sstream>
 #include <string>
-#include <string_view>
 #include <system_error>
-#include <vector>
 
 #include "bvhopt/error.h"
 #include "bvhopt/scene_file.h"
@@ -32,19 +26,21 @@ std::string clean_assimp_error(const char* text) {
   return s.empty() ? std::string("unknown assimp error") : s;
 }
 
-}  // namespace
+// What assimp does after reading. No aiProcess_FindDegenerates: zero-area triangles are part
+// of the input (conference.obj has 52,670) and must be kept and counted, not removed.
+constexpr unsigned kPostProcessing =
+    aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_RemoveComponent | aiProcess_JoinIdenticalVertices;
 
-Mesh load_mesh_file(const std::filesystem::path& path) {
-  const std::string where = path.string();
+void check_file(const std::filesystem::path& path, const std::string& where) {
   std::error_code ec;
   const auto status = std::filesystem::status(path, ec);
   if (ec || !std::filesystem::exists(status)) throw Error(where + ": no such file");
   if (std::filesystem::is_directory(status)) throw Error(where + ": is a directory, not a scene file");
   if (std::filesystem::file_size(path, ec) == 0 && !ec) throw Error(where + ": empty file");
+}
 
-  check_ply(path, where);
-
-  Assimp::Importer importer;
+// The file as assimp reads it, before any post-processing.
+const aiScene* read_scene(Assimp::Importer& importer, const std::filesystem::path& path, const std::string& where) {
   // Only positions are used: dropping normals, texture coordinates and the like before the
   // post-processing steps keeps loading fast and memory small.
   importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS, aiComponent_NORMALS | aiComponent_TANGENTS_AND_BITANGENTS |
@@ -52,11 +48,6 @@ Mesh load_mesh_file(const std::filesystem::path& path) {
                                                           aiComponent_BONEWEIGHTS | aiComponent_ANIMATIONS |
                                                           aiComponent_TEXTURES | aiComponent_LIGHTS |
                                                           aiComponent_CAMERAS | aiComponent_MATERIALS);
-  // No aiProcess_FindDegenerates: zero-area triangles are part of the input (conference.obj
-  // has 52,670) and must be kept and counted, not removed.
-  const unsigned flags = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_RemoveComponent | aiProcess_JoinIdenticalVertices;
-  // Read first and post-process second, so that a file with no faces gets our "no
-  // triangles" rather than an error from a post-processing step about orphaned meshes.
   const aiScene* scene = importer.ReadFile(where, 0);
   if (!scene) {
     const std::string ext = path.extension().string();
@@ -68,6 +59,11 @@ Mesh load_mesh_file(const std::filesystem::path& path) {
   if (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE)
     throw Error(where + ": incomplete scene (the file is truncated or corrupt, or not a " +
                 path.extension().string() + " file)");
+  return scene;
+}
+
+// Faces and numbers of the unprocessed scene.
+void check_scene(const aiScene* scene, const std::string& where) {
   bool any_face = false;
   for (unsigned m = 0; m < scene->mNumMeshes && !any_face; ++m)
     for (unsigned f = 0; f < scene->mMeshes[m]->mNumFaces && !any_face; ++f)
@@ -94,9 +90,10 @@ Mesh load_mesh_file(const std::filesystem::path& path) {
                       std::to_string(mesh->mFaces[f].mIndices[k]) + " out of range (" +
                       std::to_string(mesh->mNumVertices) + " vertices)");
   }
-  scene = importer.ApplyPostProcessing(flags);
-  if (!scene) throw Error(where + ": cannot process: " + clean_assimp_error(importer.GetErrorString()));
+}
 
+// Every mesh of the post-processed scene merged into one, in assimp's order.
+Mesh merge_meshes(const aiScene* scene, const std::filesystem::path& path, const std::string& where) {
   size_t vertex_total = 0, triangle_total = 0;
   for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
     const aiMesh* mesh = scene->mMeshes[m];
@@ -135,6 +132,23 @@ Mesh load_mesh_file(const std::filesystem::path& path) {
     }
     base += mesh->mNumVertices;
   }
+  return out;
+}
+
+}  // namespace
+
+Mesh load_mesh_file(const std::filesystem::path& path) {
+  const std::string where = path.string();
+  check_file(path, where);
+  check_ply(path, where);
+  Assimp::Importer importer;
+  // Read first and post-process second, so that a file with no faces gets our "no
+  // triangles" rather than an error from a post-processing step about orphaned meshes.
+  const aiScene* scene = read_scene(importer, path, where);
+  check_scene(scene, where);
+  scene = importer.ApplyPostProcessing(kPostProcessing);
+  if (!scene) throw Error(where + ": cannot process: " + clean_assimp_error(importer.GetErrorString()));
+  Mesh out = merge_meshes(scene, path, where);
   check_mesh(out);
   return out;
 }
