@@ -1,0 +1,72 @@
+// Single-ray SIMD traversal of wide BVHs (bvhopt/wide_bvh.h), closest and any hit, with the
+// kernel picked at run time for the CPU: SSE4.2, AVX2+FMA or AVX-512 (256-bit vectors).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string_view>
+
+#include "bvhopt/finalize.h"
+#include "bvhopt/mesh.h"
+#include "bvhopt/ray.h"
+#include "bvhopt/traversal.h"
+#include "bvhopt/wide_bvh.h"
+
+namespace bvhopt {
+
+// Instruction sets a kernel is compiled for, each in its own translation unit.
+enum class Isa : uint8_t { sse42 = 0, avx2 = 1, avx512 = 2 };
+
+// "sse", "avx2", "avx512" (the values BVHOPT_ISA takes).
+std::string_view isa_name(Isa isa);
+std::optional<Isa> parse_isa(std::string_view name);
+// Whether this CPU runs the kernel (cpuid, through __builtin_cpu_supports).
+bool isa_supported(Isa isa);
+// The kernel used when none is asked for: $BVHOPT_ISA if set (Error if the CPU lacks it or
+// the name is unknown), else the best the CPU has. Decided once, at the first call.
+Isa default_isa();
+
+// How a node with several children entered orders them, nearest first.
+enum class NearFirst : uint8_t {
+  // The child ranks computed at build time for the ray's octant (Bvh8Node::octant_rank),
+  // the entered children compacted in that order: no comparisons of distances at run time.
+  octant_order = 0,
+  // The entered children sorted by their entry distance.
+  distance_sort = 1,
+};
+
+struct WideTracerOptions {
+  WideLayoutOptions layout;
+  std::optional<Isa> isa;  // default: default_isa()
+  NearFirst near_first = NearFirst::octant_order;
+};
+
+// Hits are exact against brute force with the same triangle test: the closest triangle, ties
+// in t going to the lowest triangle id, as brute_force_closest does, so every kernel returns
+// the same hit for the same ray, whatever the order it visits the tree in.
+class WideTracer {
+ public:
+  WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOptions& options = {});
+
+  Hit closest(const Ray& ray, TraceCounters& counters) const;
+  bool any(const Ray& ray, TraceCounters& counters) const;
+  // Many rays in one call (no per-ray dispatch); counters accumulate.
+  void closest(const Ray* rays, size_t count, Hit* hits, TraceCounters& counters) const;
+  void any(const Ray* rays, size_t count, uint8_t* hit, TraceCounters& counters) const;
+
+  Isa isa() const { return isa_; }
+  const WideBvh& layout() const { return bvh_; }
+
+ private:
+  WideBvh bvh_;
+  Isa isa_;
+  NearFirst near_first_;
+};
+
+// Brute force over every triangle with the Moller-Trumbore test as the wide leaf blocks run
+// it (edges v1 - v0 and v2 - v0 in float, no fused operations): the oracle of the default
+// triangle test. Ties in t keep the lowest triangle id.
+Hit brute_force_closest_mt(const Mesh& mesh, const Ray& ray);
+
+}  // namespace bvhopt

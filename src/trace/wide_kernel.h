@@ -1,0 +1,440 @@
+// The wide traversal kernel, written once and compiled once per ISA: each
+// wide_traversal_<isa>.cpp includes this file under its own compile flags. Everything here
+// has internal linkage (an unnamed namespace), so the copies built for different ISAs never
+// meet at link time; for the same reason this file calls nothing from the standard library
+// that could be emitted out of line (a shared inline function compiled with AVX-512 could
+// otherwise be the copy the linker keeps for everyone).
+//
+// Exactness across ISAs: the triangle tests use no fused multiply-add (the ISA files are
+// compiled with -ffp-contract=off) and the same operation order as the scalar oracles, so
+// every kernel computes bit-identical t, u, v; ties in t go to the lowest triangle id. Only
+// the slab test differs (fused on AVX2/AVX-512), which changes which padded boxes are
+// entered at grazing angles but never the closest hit.
+#pragma once
+
+#include <immintrin.h>
+
+#include <cstdint>
+
+#include "trace/wide_kernels.h"
+
+namespace bvhopt::wide_kernels {
+namespace {
+
+constexpr float kInfinity = __builtin_inff();
+constexpr float kLargest = 3.40282347e+38f;
+// The binary tracer's conservative exit scaling (Ize 2013), see traversal.cpp.
+constexpr float kExitScale = 1.0f + 2.0f * (3.0f * 0x1p-24f / (1.0f - 3.0f * 0x1p-24f));
+
+inline float abs_f(float x) { return __builtin_fabsf(x); }
+inline float max_f(float a, float b) { return a > b ? a : b; }
+inline uint32_t lowest_bit(uint32_t m) { return uint32_t(__builtin_ctz(m)); }
+inline uint32_t highest_bit(uint32_t m) { return 31u - uint32_t(__builtin_clz(m)); }
+
+// Per-ray values, computed once.
+struct KernelRay {
+  float org[3], dir[3];
+  float rdir[3], org_rdir[3];
+  uint32_t near_row[3], far_row[3];  // bounds row (0..5) of the near and far plane per axis
+  uint32_t octant;
+  float tmin;
+  // Watertight test (Woop et al. 2013).
+  int kx, ky, kz;
+  float sx, sy, sz;
+};
+
+inline KernelRay make_ray(const Ray& ray) {
+  KernelRay r;
+  const float d[3] = {ray.dir.x, ray.dir.y, ray.dir.z};
+  const float o[3] = {ray.org.x, ray.org.y, ray.org.z};
+  const float biggest = max_f(abs_f(d[0]), max_f(abs_f(d[1]), abs_f(d[2])));
+  r.octant = 0;
+  for (int a = 0; a < 3; ++a) {
+    const bool neg = __builtin_signbit(d[a]) != 0;
+    // A zero component is raised to 1e-20 of the largest (sign kept), as in the binary
+    // tracer: the inverse stays finite, so no 0 * inf = NaN on a slab through the origin.
+    float c = d[a];
+    if (abs_f(c) < biggest * 1e-20f) c = neg ? -biggest * 1e-20f : biggest * 1e-20f;
+    r.org[a] = o[a];
+    r.dir[a] = d[a];
+    r.rdir[a] = 1.0f / c;
+    r.org_rdir[a] = o[a] * r.rdir[a];
+    r.near_row[a] = uint32_t(2 * a + (neg ? 1 : 0));
+    r.far_row[a] = uint32_t(2 * a + (neg ? 0 : 1));
+    r.octant |= (neg ? 1u : 0u) << a;
+  }
+  r.tmin = ray.tmin;
+  int kz = 0;
+  if (abs_f(d[1]) > abs_f(d[kz])) kz = 1;
+  if (abs_f(d[2]) > abs_f(d[kz])) kz = 2;
+  int kx = kz == 2 ? 0 : kz + 1;
+  int ky = kx == 2 ? 0 : kx + 1;
+  if (d[kz] < 0.0f) {
+    const int s = kx;
+    kx = ky;
+    ky = s;
+  }
+  r.kx = kx;
+  r.ky = ky;
+  r.kz = kz;
+  r.sx = d[kx] / d[kz];
+  r.sy = d[ky] / d[kz];
+  r.sz = 1.0f / d[kz];
+  return r;
+}
+
+// The closest hit so far. t is an inclusive bound: a hit at exactly t replaces it only with
+// a lower triangle id (so the result does not depend on the visiting order).
+struct BestHit {
+  float t;
+  float u = 0.0f, v = 0.0f;
+  uint32_t id = kNoHit;
+
+  bool offer(float t_, float u_, float v_, uint32_t id_) {
+    if (t_ < t || (t_ == t && id_ < id)) {
+      t = t_;
+      u = u_;
+      v = v_;
+      id = id_;
+      return true;
+    }
+    return false;
+  }
+};
+
+// ---- Slab test: all children of a node at once. -------------------------------------------
+
+// Entry distances to tnear, and the mask of children entered within [tmin, limit].
+template <uint32_t W>
+inline uint32_t slab_test(const float (*bounds)[W], const KernelRay& r, float limit, float* tnear);
+
+#if defined(__AVX2__)
+inline __m256 row8(const float (*b)[8], uint32_t row) { return _mm256_load_ps(b[row]); }
+template <>
+inline __attribute__((always_inline)) uint32_t slab_test<8>(const float (*b)[8], const KernelRay& r, float limit,
+                                                            float* tnear) {
+  const __m256 rx = _mm256_set1_ps(r.rdir[0]), ry = _mm256_set1_ps(r.rdir[1]), rz = _mm256_set1_ps(r.rdir[2]);
+  const __m256 ox = _mm256_set1_ps(r.org_rdir[0]), oy = _mm256_set1_ps(r.org_rdir[1]), oz = _mm256_set1_ps(r.org_rdir[2]);
+  const __m256 nx = _mm256_fmsub_ps(row8(b, r.near_row[0]), rx, ox);
+  const __m256 ny = _mm256_fmsub_ps(row8(b, r.near_row[1]), ry, oy);
+  const __m256 nz = _mm256_fmsub_ps(row8(b, r.near_row[2]), rz, oz);
+  const __m256 fx = _mm256_fmsub_ps(row8(b, r.far_row[0]), rx, ox);
+  const __m256 fy = _mm256_fmsub_ps(row8(b, r.far_row[1]), ry, oy);
+  const __m256 fz = _mm256_fmsub_ps(row8(b, r.far_row[2]), rz, oz);
+  const __m256 tn = _mm256_max_ps(_mm256_max_ps(nx, ny), _mm256_max_ps(nz, _mm256_set1_ps(r.tmin)));
+  const __m256 tf = _mm256_mul_ps(_mm256_min_ps(_mm256_min_ps(fx, fy), _mm256_min_ps(fz, _mm256_set1_ps(limit))),
+                                  _mm256_set1_ps(kExitScale));
+  _mm256_store_ps(tnear, tn);
+#if defined(__AVX512VL__)
+  return uint32_t(_mm256_cmp_ps_mask(tn, tf, _CMP_LE_OQ));
+#else
+  return uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(tn, tf, _CMP_LE_OQ)));
+#endif
+}
+#endif
+
+// Four lanes starting at column `col` of a W-wide node.
+template <uint32_t W>
+inline __attribute__((always_inline)) uint32_t slab_test4(const float (*b)[W], uint32_t col, const KernelRay& r,
+                                                          float limit, float* tnear) {
+  auto row = [&](uint32_t i) { return _mm_load_ps(b[i] + col); };
+  const __m128 rx = _mm_set1_ps(r.rdir[0]), ry = _mm_set1_ps(r.rdir[1]), rz = _mm_set1_ps(r.rdir[2]);
+  const __m128 ox = _mm_set1_ps(r.org_rdir[0]), oy = _mm_set1_ps(r.org_rdir[1]), oz = _mm_set1_ps(r.org_rdir[2]);
+#if defined(__FMA__)
+  const __m128 nx = _mm_fmsub_ps(row(r.near_row[0]), rx, ox);
+  const __m128 ny = _mm_fmsub_ps(row(r.near_row[1]), ry, oy);
+  const __m128 nz = _mm_fmsub_ps(row(r.near_row[2]), rz, oz);
+  const __m128 fx = _mm_fmsub_ps(row(r.far_row[0]), rx, ox);
+  const __m128 fy = _mm_fmsub_ps(row(r.far_row[1]), ry, oy);
+  const __m128 fz = _mm_fmsub_ps(row(r.far_row[2]), rz, oz);
+#else
+  const __m128 nx = _mm_sub_ps(_mm_mul_ps(row(r.near_row[0]), rx), ox);
+  const __m128 ny = _mm_sub_ps(_mm_mul_ps(row(r.near_row[1]), ry), oy);
+  const __m128 nz = _mm_sub_ps(_mm_mul_ps(row(r.near_row[2]), rz), oz);
+  const __m128 fx = _mm_sub_ps(_mm_mul_ps(row(r.far_row[0]), rx), ox);
+  const __m128 fy = _mm_sub_ps(_mm_mul_ps(row(r.far_row[1]), ry), oy);
+  const __m128 fz = _mm_sub_ps(_mm_mul_ps(row(r.far_row[2]), rz), oz);
+#endif
+  const __m128 tn = _mm_max_ps(_mm_max_ps(nx, ny), _mm_max_ps(nz, _mm_set1_ps(r.tmin)));
+  const __m128 tf = _mm_mul_ps(_mm_min_ps(_mm_min_ps(fx, fy), _mm_min_ps(fz, _mm_set1_ps(limit))), _mm_set1_ps(kExitScale));
+  _mm_store_ps(tnear + col, tn);
+#if defined(__AVX512VL__)
+  return uint32_t(_mm_cmp_ps_mask(tn, tf, _CMP_LE_OQ)) << col;
+#else
+  return uint32_t(_mm_movemask_ps(_mm_cmple_ps(tn, tf))) << col;
+#endif
+}
+
+template <>
+inline __attribute__((always_inline)) uint32_t slab_test<4>(const float (*b)[4], const KernelRay& r, float limit,
+                                                            float* tnear) {
+  return slab_test4<4>(b, 0, r, limit, tnear);
+}
+
+#if !defined(__AVX2__)
+template <>
+inline __attribute__((always_inline)) uint32_t slab_test<8>(const float (*b)[8], const KernelRay& r, float limit,
+                                                            float* tnear) {
+  return slab_test4<8>(b, 0, r, limit, tnear) | slab_test4<8>(b, 4, r, limit, tnear);
+}
+#endif
+
+// ---- Triangle tests on a block of four. -----------------------------------------------------
+
+// Offers the block's accepted lanes to `best`; whether any lane was accepted (for any-hit:
+// whether anything was hit at all).
+inline bool offer_lanes(uint32_t mask, __m128 t, __m128 u, __m128 v, const uint32_t* ids, BestHit& best) {
+  alignas(16) float ts[4], us[4], vs[4];
+  _mm_store_ps(ts, t);
+  _mm_store_ps(us, u);
+  _mm_store_ps(vs, v);
+  bool any = false;
+  for (; mask; mask &= mask - 1) {
+    const uint32_t l = lowest_bit(mask);
+    any |= best.offer(ts[l], us[l], vs[l], ids[l]);
+  }
+  return any;
+}
+
+// Moller-Trumbore with the operation order of brute_force_closest_mt.
+inline __attribute__((always_inline)) bool block_moller_trumbore(const TriangleBlock& b, const KernelRay& r, BestHit& best) {
+  const __m128 dx = _mm_set1_ps(r.dir[0]), dy = _mm_set1_ps(r.dir[1]), dz = _mm_set1_ps(r.dir[2]);
+  const __m128 e1x = _mm_load_ps(b.p[3]), e1y = _mm_load_ps(b.p[4]), e1z = _mm_load_ps(b.p[5]);
+  const __m128 e2x = _mm_load_ps(b.p[6]), e2y = _mm_load_ps(b.p[7]), e2z = _mm_load_ps(b.p[8]);
+  const __m128 px = _mm_sub_ps(_mm_mul_ps(dy, e2z), _mm_mul_ps(dz, e2y));
+  const __m128 py = _mm_sub_ps(_mm_mul_ps(dz, e2x), _mm_mul_ps(dx, e2z));
+  const __m128 pz = _mm_sub_ps(_mm_mul_ps(dx, e2y), _mm_mul_ps(dy, e2x));
+  const __m128 det = _mm_add_ps(_mm_add_ps(_mm_mul_ps(e1x, px), _mm_mul_ps(e1y, py)), _mm_mul_ps(e1z, pz));
+  const __m128 tx = _mm_sub_ps(_mm_set1_ps(r.org[0]), _mm_load_ps(b.p[0]));
+  const __m128 ty = _mm_sub_ps(_mm_set1_ps(r.org[1]), _mm_load_ps(b.p[1]));
+  const __m128 tz = _mm_sub_ps(_mm_set1_ps(r.org[2]), _mm_load_ps(b.p[2]));
+  const __m128 uu = _mm_add_ps(_mm_add_ps(_mm_mul_ps(tx, px), _mm_mul_ps(ty, py)), _mm_mul_ps(tz, pz));
+  const __m128 qx = _mm_sub_ps(_mm_mul_ps(ty, e1z), _mm_mul_ps(tz, e1y));
+  const __m128 qy = _mm_sub_ps(_mm_mul_ps(tz, e1x), _mm_mul_ps(tx, e1z));
+  const __m128 qz = _mm_sub_ps(_mm_mul_ps(tx, e1y), _mm_mul_ps(ty, e1x));
+  const __m128 vv = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, qx), _mm_mul_ps(dy, qy)), _mm_mul_ps(dz, qz));
+  const __m128 tt = _mm_add_ps(_mm_add_ps(_mm_mul_ps(e2x, qx), _mm_mul_ps(e2y, qy)), _mm_mul_ps(e2z, qz));
+  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), det);
+  const __m128 u = _mm_mul_ps(uu, inv), v = _mm_mul_ps(vv, inv), t = _mm_mul_ps(tt, inv);
+  const __m128 zero = _mm_setzero_ps();
+  __m128 ok = _mm_and_ps(_mm_cmpneq_ps(det, zero), _mm_cmpge_ps(u, zero));
+  ok = _mm_and_ps(ok, _mm_cmpge_ps(v, zero));
+  ok = _mm_and_ps(ok, _mm_cmple_ps(_mm_add_ps(u, v), _mm_set1_ps(1.0f)));
+  ok = _mm_and_ps(ok, _mm_cmpge_ps(t, _mm_set1_ps(r.tmin)));
+  ok = _mm_and_ps(ok, _mm_cmple_ps(t, _mm_set1_ps(best.t)));
+  const uint32_t mask = uint32_t(_mm_movemask_ps(ok));
+  return mask != 0 && offer_lanes(mask, t, u, v, b.id, best);
+}
+
+// Woop et al.'s watertight test with the operation order of the scalar one in traversal.cpp,
+// including its double-precision recomputation when an edge function is zero.
+inline bool block_watertight(const TriangleBlock& b, const KernelRay& r, BestHit& best) {
+  const __m128 okx = _mm_set1_ps(r.org[r.kx]), oky = _mm_set1_ps(r.org[r.ky]), okz = _mm_set1_ps(r.org[r.kz]);
+  const __m128 ax = _mm_sub_ps(_mm_load_ps(b.p[r.kx]), okx), ay = _mm_sub_ps(_mm_load_ps(b.p[r.ky]), oky);
+  const __m128 az = _mm_sub_ps(_mm_load_ps(b.p[r.kz]), okz);
+  const __m128 bx = _mm_sub_ps(_mm_load_ps(b.p[3 + r.kx]), okx), by = _mm_sub_ps(_mm_load_ps(b.p[3 + r.ky]), oky);
+  const __m128 bz = _mm_sub_ps(_mm_load_ps(b.p[3 + r.kz]), okz);
+  const __m128 cx = _mm_sub_ps(_mm_load_ps(b.p[6 + r.kx]), okx), cy = _mm_sub_ps(_mm_load_ps(b.p[6 + r.ky]), oky);
+  const __m128 cz = _mm_sub_ps(_mm_load_ps(b.p[6 + r.kz]), okz);
+  const __m128 sx = _mm_set1_ps(r.sx), sy = _mm_set1_ps(r.sy), sz = _mm_set1_ps(r.sz);
+  const __m128 Ax = _mm_sub_ps(ax, _mm_mul_ps(sx, az)), Ay = _mm_sub_ps(ay, _mm_mul_ps(sy, az));
+  const __m128 Bx = _mm_sub_ps(bx, _mm_mul_ps(sx, bz)), By = _mm_sub_ps(by, _mm_mul_ps(sy, bz));
+  const __m128 Cx = _mm_sub_ps(cx, _mm_mul_ps(sx, cz)), Cy = _mm_sub_ps(cy, _mm_mul_ps(sy, cz));
+  __m128 U = _mm_sub_ps(_mm_mul_ps(Cx, By), _mm_mul_ps(Cy, Bx));
+  __m128 V = _mm_sub_ps(_mm_mul_ps(Ax, Cy), _mm_mul_ps(Ay, Cx));
+  __m128 W = _mm_sub_ps(_mm_mul_ps(Bx, Ay), _mm_mul_ps(By, Ax));
+  const __m128 zero = _mm_setzero_ps();
+  const uint32_t zeros = uint32_t(_mm_movemask_ps(
+      _mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(U, zero), _mm_cmpeq_ps(V, zero)), _mm_cmpeq_ps(W, zero))));
+  if (zeros) {
+    alignas(16) float f[6][4], e[3][4];
+    _mm_store_ps(f[0], Ax), _mm_store_ps(f[1], Ay), _mm_store_ps(f[2], Bx);
+    _mm_store_ps(f[3], By), _mm_store_ps(f[4], Cx), _mm_store_ps(f[5], Cy);
+    _mm_store_ps(e[0], U), _mm_store_ps(e[1], V), _mm_store_ps(e[2], W);
+    for (uint32_t m = zeros; m; m &= m - 1) {
+      const uint32_t l = lowest_bit(m);
+      const double dAx = f[0][l], dAy = f[1][l], dBx = f[2][l], dBy = f[3][l], dCx = f[4][l], dCy = f[5][l];
+      e[0][l] = float(dCx * dBy - dCy * dBx);
+      e[1][l] = float(dAx * dCy - dAy * dCx);
+      e[2][l] = float(dBx * dAy - dBy * dAx);
+    }
+    U = _mm_load_ps(e[0]);
+    V = _mm_load_ps(e[1]);
+    W = _mm_load_ps(e[2]);
+  }
+  const __m128 neg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(U, zero), _mm_cmplt_ps(V, zero)), _mm_cmplt_ps(W, zero));
+  const __m128 pos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(U, zero), _mm_cmpgt_ps(V, zero)), _mm_cmpgt_ps(W, zero));
+  const __m128 det = _mm_add_ps(_mm_add_ps(U, V), W);
+  const __m128 T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, _mm_mul_ps(sz, az)), _mm_mul_ps(V, _mm_mul_ps(sz, bz))),
+                              _mm_mul_ps(W, _mm_mul_ps(sz, cz)));
+  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), det);
+  const __m128 t = _mm_mul_ps(T, inv);
+  __m128 ok = _mm_andnot_ps(_mm_and_ps(neg, pos), _mm_cmpneq_ps(det, zero));
+  ok = _mm_and_ps(ok, _mm_cmpge_ps(t, _mm_set1_ps(r.tmin)));
+  ok = _mm_and_ps(ok, _mm_cmple_ps(t, _mm_set1_ps(best.t)));
+  const uint32_t mask = uint32_t(_mm_movemask_ps(ok));
+  return mask != 0 && offer_lanes(mask, t, _mm_mul_ps(V, inv), _mm_mul_ps(W, inv), b.id, best);
+}
+
+// ---- Traversal. -----------------------------------------------------------------------------
+
+template <uint32_t W>
+struct WideNode;
+template <>
+struct WideNode<8> {
+  using Node = Bvh8Node;
+  static uint32_t rank(const Node& n, uint32_t octant, uint32_t c) { return (n.octant_rank[octant] >> (3 * c)) & 7u; }
+};
+template <>
+struct WideNode<4> {
+  using Node = Bvh4Node;
+  static uint32_t rank(const Node& n, uint32_t octant, uint32_t c) { return (n.octant_rank[octant] >> (2 * c)) & 3u; }
+};
+
+template <class T>
+inline const T* at_unit(const std::byte* arena, uint32_t word) {
+  return reinterpret_cast<const T*>(arena + size_t(word & kWideOffsetMask) * kWideUnit);
+}
+
+// Two or more children entered (`first` and the bits of `rest`): the nearest becomes the
+// next node, the others go on the stack farthest first.
+template <uint32_t W, NearFirst kOrder>
+inline __attribute__((always_inline)) uint32_t order_children(const typename WideNode<W>::Node& n, uint32_t octant,
+                                                              uint32_t first, uint32_t rest, const float* tnear,
+                                                              StackEntry* stack, uint32_t& sp) {
+  if constexpr (kOrder == NearFirst::octant_order) {
+    // Compaction: each entered child moves to its rank's slot; ranks then pop off the mask.
+    uint32_t slot[W];
+    uint32_t ranks = 0;
+    const uint32_t r0 = WideNode<W>::rank(n, octant, first);
+    slot[r0] = first;
+    ranks |= 1u << r0;
+    for (; rest; rest &= rest - 1) {
+      const uint32_t c = lowest_bit(rest), r = WideNode<W>::rank(n, octant, c);
+      slot[r] = c;
+      ranks |= 1u << r;
+    }
+    const uint32_t nearest = slot[lowest_bit(ranks)];
+    ranks &= ranks - 1;
+    for (; ranks; ) {
+      const uint32_t r = highest_bit(ranks);
+      ranks ^= 1u << r;
+      stack[sp++] = {n.child[slot[r]], tnear[slot[r]]};
+    }
+    return n.child[nearest];
+  } else {
+    // Insertion into the stack top, kept sorted with the nearest on top.
+    const uint32_t base = sp;
+    uint32_t all = rest | (1u << first);
+    for (; all; all &= all - 1) {
+      const uint32_t c = lowest_bit(all);
+      const StackEntry e{n.child[c], tnear[c]};
+      uint32_t i = sp++;
+      while (i > base && stack[i - 1].t < e.t) {
+        stack[i] = stack[i - 1];
+        --i;
+      }
+      stack[i] = e;
+    }
+    return stack[--sp].word;
+  }
+}
+
+template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kAny>
+bool traverse(const Batch& batch, const Ray& ray, Hit& out, TraceCounters& counters) {
+  using Node = typename WideNode<W>::Node;
+  const std::byte* arena = batch.arena;
+  StackEntry* stack = batch.stack;
+  const KernelRay r = make_ray(ray);
+  BestHit best;
+  best.t = ray.tmax < kLargest ? ray.tmax : kLargest;
+  uint32_t steps = 0, tests = 0, sp = 0;
+  bool found = false;
+  alignas(32) float tnear[W];
+  uint32_t word = batch.root;
+  for (;;) {
+    while (!(word & kWideLeafFlag)) {
+      const Node& n = *at_unit<Node>(arena, word);
+      ++steps;
+      uint32_t mask = slab_test<W>(n.bounds, r, best.t, tnear);
+      if (mask == 0) goto pop;
+      const uint32_t first = lowest_bit(mask);
+      mask &= mask - 1;
+      if (mask == 0) {
+        word = n.child[first];  // one child: no stack traffic
+        continue;
+      }
+      word = order_children<W, kOrder>(n, r.octant, first, mask, tnear, stack, sp);
+    }
+    {
+      ++steps;
+      const TriangleBlock* blocks = at_unit<TriangleBlock>(arena, word);
+      const uint32_t count = ((word >> 27) & 15u) + 1;
+      tests += 4 * count;
+      for (uint32_t i = 0; i < count; ++i) {
+        const bool hit = kTest == TriangleTest::watertight ? block_watertight(blocks[i], r, best)
+                                                          : block_moller_trumbore(blocks[i], r, best);
+        found |= hit;
+        if (kAny && hit) goto done;
+      }
+    }
+  pop:
+    for (;;) {
+      if (sp == 0) goto done;
+      --sp;
+      // Entries pushed before a closer hit was found may now lie beyond it.
+      if (stack[sp].t <= best.t) {
+        word = stack[sp].word;
+        break;
+      }
+    }
+  }
+done:
+  counters.steps += steps;
+  counters.triangle_tests += tests;
+  out = Hit{};
+  if (found) {
+    out.t = best.t;
+    out.u = best.u;
+    out.v = best.v;
+    out.triangle_id = best.id;
+  }
+  return found;
+}
+
+template <uint32_t W, TriangleTest kTest, NearFirst kOrder>
+void trace_all(const Batch& b) {
+  TraceCounters& c = *b.counters;
+  if (b.hits) {
+    for (size_t i = 0; i < b.count; ++i) traverse<W, kTest, kOrder, false>(b, b.rays[i], b.hits[i], c);
+  } else {
+    Hit h;
+    for (size_t i = 0; i < b.count; ++i) b.any_hits[i] = traverse<W, kTest, kOrder, true>(b, b.rays[i], h, c) ? 1 : 0;
+  }
+}
+
+template <uint32_t W, TriangleTest kTest>
+void trace_order(const Batch& b) {
+  if (b.near_first == NearFirst::distance_sort)
+    trace_all<W, kTest, NearFirst::distance_sort>(b);
+  else
+    trace_all<W, kTest, NearFirst::octant_order>(b);
+}
+
+template <uint32_t W>
+void trace_test(const Batch& b) {
+  if (b.test == TriangleTest::watertight)
+    trace_order<W, TriangleTest::watertight>(b);
+  else
+    trace_order<W, TriangleTest::moller_trumbore>(b);
+}
+
+inline void trace_batch(const Batch& b) {
+  if (b.width == 4)
+    trace_test<4>(b);
+  else
+    trace_test<8>(b);
+}
+
+}  // namespace
+}  // namespace bvhopt::wide_kernels

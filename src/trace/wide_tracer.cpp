@@ -1,0 +1,84 @@
+// The wide tracer: the layout plus the kernel of the chosen ISA.
+#include "bvhopt/wide_tracer.h"
+
+#include <string>
+#include <vector>
+
+#include "bvhopt/error.h"
+#include "trace/wide_kernels.h"
+
+namespace bvhopt {
+namespace {
+
+using KernelFn = void (*)(const wide_kernels::Batch&);
+
+KernelFn kernel_for(Isa isa) {
+  switch (isa) {
+    case Isa::sse42: return wide_kernels::trace_sse42;
+    case Isa::avx2: return wide_kernels::trace_avx2;
+    case Isa::avx512: return wide_kernels::trace_avx512;
+  }
+  return wide_kernels::trace_sse42;
+}
+
+// Most traversals fit a stack on the C stack; deeper trees get one on the heap.
+constexpr uint32_t kFixedStack = 512;
+
+}  // namespace
+
+WideTracer::WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOptions& options)
+    : bvh_(bvh, mesh, options.layout), isa_(options.isa ? *options.isa : default_isa()), near_first_(options.near_first) {
+  if (!isa_supported(isa_)) throw Error("wide tracer: this CPU does not support " + std::string(isa_name(isa_)));
+}
+
+namespace {
+template <class Fill>
+void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, TraceCounters& counters, Fill&& fill) {
+  wide_kernels::StackEntry fixed[kFixedStack];
+  std::vector<wide_kernels::StackEntry> heap;
+  wide_kernels::Batch b{};
+  b.stack = fixed;
+  if (bvh.stack_entries() > kFixedStack) {
+    heap.resize(bvh.stack_entries());
+    b.stack = heap.data();
+  }
+  b.arena = bvh.data();
+  b.root = bvh.root();
+  b.width = bvh.width();
+  b.test = bvh.triangle_test();
+  b.near_first = order;
+  b.counters = &counters;
+  fill(b);
+  kernel_for(isa)(b);
+}
+}  // namespace
+
+void WideTracer::closest(const Ray* rays, size_t count, Hit* hits, TraceCounters& counters) const {
+  run_kernel(bvh_, isa_, near_first_, counters, [&](wide_kernels::Batch& b) {
+    b.rays = rays;
+    b.count = count;
+    b.hits = hits;
+  });
+}
+
+void WideTracer::any(const Ray* rays, size_t count, uint8_t* hit, TraceCounters& counters) const {
+  run_kernel(bvh_, isa_, near_first_, counters, [&](wide_kernels::Batch& b) {
+    b.rays = rays;
+    b.count = count;
+    b.any_hits = hit;
+  });
+}
+
+Hit WideTracer::closest(const Ray& ray, TraceCounters& counters) const {
+  Hit hit;
+  closest(&ray, 1, &hit, counters);
+  return hit;
+}
+
+bool WideTracer::any(const Ray& ray, TraceCounters& counters) const {
+  uint8_t hit = 0;
+  any(&ray, 1, &hit, counters);
+  return hit != 0;
+}
+
+}  // namespace bvhopt

@@ -1,0 +1,383 @@
+// Wide traversal against brute force: every builder and optimizer, widths 4 and 8, both
+// triangle tests, both child orders, every ISA the machine has, with and without edge volume
+// subdivision; the kernels against each other hit for hit; awkward rays for the slab test.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "bvhopt/build.h"
+#include "bvhopt/collapse_leaves.h"
+#include "bvhopt/edge_volume_subdivision.h"
+#include "bvhopt/error.h"
+#include "bvhopt/finalize.h"
+#include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/ray_sets.h"
+#include "bvhopt/references.h"
+#include "bvhopt/traversal.h"
+#include "bvhopt/tree_rotations.h"
+#include "bvhopt/wide_tracer.h"
+#include "test_support.h"
+
+namespace bvhopt {
+namespace {
+
+std::vector<Isa> machine_isas() {
+  std::vector<Isa> out;
+  for (Isa isa : {Isa::sse42, Isa::avx2, Isa::avx512})
+    if (isa_supported(isa)) out.push_back(isa);
+  return out;
+}
+
+Hit oracle(const Mesh& mesh, const Ray& ray, TriangleTest test) {
+  return test == TriangleTest::watertight ? brute_force_closest(mesh, ray) : brute_force_closest_mt(mesh, ray);
+}
+
+struct Variant {
+  uint32_t width;
+  TriangleTest test;
+  NearFirst order;
+  Isa isa;
+  std::string name() const {
+    return "bvh" + std::to_string(width) + " " + std::string(triangle_test_name(test)) + " " +
+           (order == NearFirst::octant_order ? "octant" : "sorted") + " " + std::string(isa_name(isa));
+  }
+};
+
+std::vector<Variant> all_variants() {
+  std::vector<Variant> out;
+  for (uint32_t w : {4u, 8u})
+    for (TriangleTest t : {TriangleTest::moller_trumbore, TriangleTest::watertight})
+      for (NearFirst o : {NearFirst::octant_order, NearFirst::distance_sort})
+        for (Isa isa : machine_isas()) out.push_back({w, t, o, isa});
+  return out;
+}
+
+WideTracer make_tracer(const FlatBvh& flat, const Mesh& mesh, const Variant& v,
+                       CollapseMethod method = CollapseMethod::sah_optimal) {
+  WideTracerOptions o;
+  o.layout.collapse.width = v.width;
+  o.layout.collapse.method = method;
+  o.layout.test = v.test;
+  o.isa = v.isa;
+  o.near_first = v.order;
+  return WideTracer(flat, mesh, o);
+}
+
+// Brute-force hits of a ray set for both triangle tests, computed once per set.
+struct Expected {
+  RaySet set;
+  std::vector<Hit> hits[2];  // by TriangleTest
+};
+
+std::vector<Expected> expected_hits(const Mesh& mesh, const std::vector<RaySet>& sets) {
+  std::vector<Expected> out;
+  for (const RaySet& set : sets) {
+    Expected e{set, {}};
+    for (TriangleTest t : {TriangleTest::moller_trumbore, TriangleTest::watertight})
+      for (const Ray& r : set.rays) e.hits[int(t)].push_back(oracle(mesh, r, t));
+    out.push_back(std::move(e));
+  }
+  return out;
+}
+
+// Exact: same triangle (ties in t already go to the lowest id on both sides), same t, u, v.
+// Returns the number of mismatches and records the first.
+size_t count_mismatches(const WideTracer& tracer, const std::vector<Ray>& rays, const std::vector<Hit>& want,
+                        RayQuery query, std::string& first) {
+  std::vector<Hit> hits(rays.size());
+  std::vector<uint8_t> any(rays.size());
+  TraceCounters counters;
+  tracer.closest(rays.data(), rays.size(), hits.data(), counters);
+  if (query == RayQuery::any) tracer.any(rays.data(), rays.size(), any.data(), counters);
+  size_t bad = 0;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    const Hit& got = hits[i];
+    const bool same = got.triangle_id == want[i].triangle_id &&
+                      (!want[i].hit() || (got.t == want[i].t && got.u == want[i].u && got.v == want[i].v));
+    const bool any_ok = query != RayQuery::any || (any[i] != 0) == want[i].hit();
+    if (same && any_ok) continue;
+    if (bad++ == 0)
+      first = "ray " + std::to_string(i) + ": got " + std::to_string(got.triangle_id) + " t " + std::to_string(got.t) +
+              ", brute force " + std::to_string(want[i].triangle_id) + " t " + std::to_string(want[i].t) +
+              (any_ok ? "" : " (any-hit disagrees)");
+  }
+  return bad;
+}
+
+size_t count_mismatches(const WideTracer& tracer, const Mesh& mesh, const std::vector<Ray>& rays, RayQuery query,
+                        TriangleTest test, std::string& first) {
+  std::vector<Hit> want;
+  for (const Ray& r : rays) want.push_back(oracle(mesh, r, test));
+  return count_mismatches(tracer, rays, want, query, first);
+}
+
+void expect_all_variants_match(const FlatBvh& flat, const Mesh& mesh, const std::vector<Expected>& expected,
+                               const std::string& what) {
+  for (const Variant& v : all_variants()) {
+    const WideTracer tracer = make_tracer(flat, mesh, v);
+    for (const Expected& e : expected) {
+      std::string first;
+      const size_t bad = count_mismatches(tracer, e.set.rays, e.hits[int(v.test)], e.set.query, first);
+      EXPECT_EQ(bad, 0u) << what << " " << v.name() << " " << ray_kind_name(e.set.kind) << ": " << first;
+    }
+  }
+}
+
+std::vector<RaySet> ray_sets_for(const Mesh& mesh, const FlatBvh& flat, size_t count,
+                                 std::vector<RayKind> kinds = {RayKind::primary, RayKind::random, RayKind::ao,
+                                                               RayKind::shadow}) {
+  const Tracer tracer(flat, mesh);
+  std::vector<RaySet> sets;
+  for (RayKind kind : kinds) {
+    RaySetConfig cfg;
+    cfg.kind = kind;
+    cfg.seed = 5;
+    cfg.count = count;
+    cfg.width = 64;
+    cfg.height = 48;
+    sets.push_back(make_ray_set(mesh, tracer, cfg));
+  }
+  return sets;
+}
+
+FlatBvh built(const Mesh& mesh, const PrimitiveRefs& refs, BuilderKind kind, uint32_t leaf,
+              const std::function<void(Bvh&)>& optimize = {}) {
+  BuildOptions options;
+  options.kind = kind;
+  options.leaf.max_leaf_size = leaf;
+  Bvh bvh = build_bvh(refs, options);
+  if (optimize) optimize(bvh);
+  return finalize(bvh, refs);
+}
+
+TEST(WideTrace, EveryBuilderMatchesBruteForce) {
+  const Mesh mesh = testing::random_mesh(1200, 21, /*with_degenerate=*/true);
+  const PrimitiveRefs refs = make_references(mesh);
+  const std::vector<RaySet> sets = ray_sets_for(mesh, built(mesh, refs, BuilderKind::sweep_sah, 1), 1500);
+  for (const RaySet& set : sets) ASSERT_GE(set.rays.size(), 1000u);
+  const std::vector<Expected> expected = expected_hits(mesh, sets);
+  for (BuilderKind kind : all_builders())
+    for (uint32_t leaf : {1u, 8u})
+      expect_all_variants_match(built(mesh, refs, kind, leaf), mesh, expected,
+                                std::string(builder_name(kind)) + " leaf " + std::to_string(leaf));
+}
+
+TEST(WideTrace, EveryOptimizerMatchesBruteForce) {
+  const Mesh mesh = testing::random_mesh(800, 22, true);
+  const PrimitiveRefs refs = make_references(mesh);
+  const std::vector<RaySet> sets = ray_sets_for(mesh, built(mesh, refs, BuilderKind::sweep_sah, 1), 1200);
+  const std::vector<std::pair<std::string, std::function<void(Bvh&)>>> optimizers = {
+      {"insertion", [](Bvh& b) { optimize_insertion(b, {.max_passes = 20}); }},
+      {"hill-climb", [](Bvh& b) { hill_climb(b, {.limits = {.max_passes = 20}}); }},
+      {"anneal", [](Bvh& b) { anneal(b, {.schedule_passes = 30, .period = 10}); }},
+      {"insertion+collapse",
+       [](Bvh& b) {
+         optimize_insertion(b, {.max_passes = 20});
+         collapse_leaves(b, {.max_leaf_size = 8});
+       }},
+  };
+  const std::vector<Expected> expected = expected_hits(mesh, sets);
+  for (const auto& [name, optimize] : optimizers)
+    expect_all_variants_match(built(mesh, refs, BuilderKind::sweep_sah, 1, optimize), mesh, expected, name);
+}
+
+TEST(WideTrace, EdgeVolumeSubdivisionGivesOneHitPerTriangle) {
+  const Mesh mesh = testing::random_mesh(600, 23, true);
+  EdgeVolumeConfig evh;
+  evh.t = 16;
+  const EdgeVolumeResult split = subdivide_edge_volume(mesh, evh);
+  ASSERT_GT(split.stats.ratio, 1.5);  // several references per triangle, else the test says nothing
+  const std::vector<RaySet> sets = ray_sets_for(mesh, built(mesh, split.refs, BuilderKind::sweep_sah, 1), 1200);
+  const std::vector<Expected> expected = expected_hits(mesh, sets);
+  for (uint32_t leaf : {1u, 4u}) {
+    const FlatBvh flat = built(mesh, split.refs, BuilderKind::sweep_sah, leaf);
+    expect_all_variants_match(flat, mesh, expected, "evh leaf " + std::to_string(leaf));
+    // Each triangle is stored once per leaf: no leaf repeats an id across its blocks.
+    const WideBvh wide(flat, mesh);
+    EXPECT_LE(wide.stats().leaves, flat.triangle_ids.size());
+  }
+}
+
+TEST(WideTrace, GreedyCollapseMatchesBruteForce) {
+  const Mesh mesh = testing::random_mesh(700, 24, true);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::binned_sah, 4);
+  const std::vector<RaySet> sets = ray_sets_for(mesh, flat, 1000);
+  for (uint32_t w : {4u, 8u}) {
+    const Variant v{w, TriangleTest::moller_trumbore, NearFirst::octant_order, default_isa()};
+    const WideTracer tracer = make_tracer(flat, mesh, v, CollapseMethod::greedy);
+    for (const RaySet& set : sets) {
+      std::string first;
+      EXPECT_EQ(count_mismatches(tracer, mesh, set.rays, set.query, v.test, first), 0u) << first;
+    }
+  }
+}
+
+TEST(WideTrace, EveryIsaAgreesHitForHitAndCountsTheSameWork) {
+  const Mesh mesh = testing::random_mesh(3000, 25, true);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 4);
+  const std::vector<RaySet> sets = ray_sets_for(mesh, flat, 4000);
+  const std::vector<Isa> isas = machine_isas();
+  ASSERT_FALSE(isas.empty());
+  for (uint32_t w : {4u, 8u}) {
+    for (TriangleTest test : {TriangleTest::moller_trumbore, TriangleTest::watertight}) {
+      for (const RaySet& set : sets) {
+        std::vector<Hit> reference;
+        for (Isa isa : isas) {
+          const WideTracer tracer = make_tracer(flat, mesh, {w, test, NearFirst::octant_order, isa});
+          std::vector<Hit> hits(set.rays.size());
+          TraceCounters c;
+          tracer.closest(set.rays.data(), set.rays.size(), hits.data(), c);
+          if (reference.empty()) {
+            reference = hits;
+            continue;
+          }
+          for (size_t i = 0; i < hits.size(); ++i) {
+            ASSERT_EQ(hits[i].triangle_id, reference[i].triangle_id) << isa_name(isa) << " ray " << i;
+            ASSERT_EQ(hits[i].t, reference[i].t) << isa_name(isa) << " ray " << i;
+            ASSERT_EQ(hits[i].u, reference[i].u);
+            ASSERT_EQ(hits[i].v, reference[i].v);
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(WideTrace, HitsSomethingAndMissesSomething) {
+  // Guards the comparisons above against a vacuous pass.
+  const Mesh mesh = testing::random_mesh(1200, 21, true);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 1);
+  const std::vector<RaySet> sets = ray_sets_for(mesh, flat, 1500);
+  const WideTracer tracer(flat, mesh);
+  for (const RaySet& set : sets) {
+    size_t hit = 0;
+    TraceCounters c;
+    for (const Ray& r : set.rays) hit += tracer.closest(r, c).hit() ? 1 : 0;
+    EXPECT_GT(hit, set.rays.size() / 50) << ray_kind_name(set.kind);
+    if (set.kind == RayKind::random) EXPECT_LT(hit, set.rays.size());
+    EXPECT_GT(c.steps, set.rays.size());
+  }
+}
+
+// Slab test cases: boxes as single triangles' bounds, rays along the axes (with +0 and -0 in
+// the other components), through box edges and corners, and with one or two zero components.
+std::vector<Ray> slab_rays(const Mesh& mesh, uint64_t seed, size_t count) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  Box box;
+  for (size_t v = 0; v < mesh.vertex_count(); ++v) box.extend(mesh.vertex(v));
+  const float far = 3.0f * length(box.extent());
+  std::vector<Ray> rays;
+  for (size_t i = 0; i < count; ++i) {
+    const Triangle t = mesh.triangle(rng() % mesh.triangle_count());
+    const Box b = t.bounds();
+    const int axis = int(rng() % 3), other = (axis + 1 + int(rng() % 2)) % 3;
+    const float sign = rng() % 2 ? -1.0f : 1.0f;
+    Ray r;
+    Vec3 target;
+    switch (i % 4) {
+      case 0:  // a vertex (a corner of the triangle's box on two axes)
+        target = (rng() % 2) ? t.v1 : t.v2;
+        break;
+      case 1:  // a point on an edge of the triangle's box
+        target = b.min;
+        target[other] = b.max[other];
+        target[axis] = b.min[axis] + u(rng) * b.extent()[axis];
+        break;
+      case 2:  // a point inside the triangle
+        target = t.v0 + (t.v1 - t.v0) * 0.3f + (t.v2 - t.v0) * 0.3f;
+        break;
+      default:  // the box corner itself
+        target = rng() % 2 ? b.min : b.max;
+        break;
+    }
+    r.dir = Vec3(sign < 0 ? -0.0f : 0.0f);
+    r.dir[axis] = sign;
+    if (i % 8 >= 4) {  // one zero component only
+      r.dir[other] = u(rng) - 0.5f;
+    }
+    r.org = target - r.dir * far;
+    if (i % 16 >= 12) r.org = target;  // origin on the slab itself
+    rays.push_back(r);
+  }
+  return rays;
+}
+
+TEST(WideTrace, AxisRaysThroughBoxEdgesAndZeroComponentsMatchBruteForce) {
+  for (uint64_t seed : {31u, 32u}) {
+    const Mesh mesh = testing::random_mesh(900, seed, true);
+    const PrimitiveRefs refs = make_references(mesh);
+    const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 2);
+    RaySet set;
+    set.kind = RayKind::random;
+    set.rays = slab_rays(mesh, seed, 4000);
+    const std::vector<Expected> expected = expected_hits(mesh, {set});
+    size_t hits = 0;
+    for (const Hit& h : expected[0].hits[0]) hits += h.hit() ? 1 : 0;
+    EXPECT_GT(hits, set.rays.size() / 4);
+    expect_all_variants_match(flat, mesh, expected, "slab rays");
+  }
+}
+
+TEST(WideTrace, SegmentsHonourTminAndTmaxIncludingTheEnds) {
+  const Mesh mesh = testing::random_mesh(500, 41, false);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 1);
+  std::vector<Ray> rays = ray_sets_for(mesh, flat, 1000)[1].rays;  // random segments
+  // Cut each segment to end exactly at (or start exactly at) its brute-force hit.
+  for (size_t i = 0; i < rays.size(); ++i) {
+    const Hit h = brute_force_closest_mt(mesh, rays[i]);
+    if (!h.hit()) continue;
+    if (i % 2) rays[i].tmax = h.t; else rays[i].tmin = h.t;
+  }
+  for (const Variant& v : all_variants()) {
+    const WideTracer tracer = make_tracer(flat, mesh, v);
+    std::string first;
+    EXPECT_EQ(count_mismatches(tracer, mesh, rays, RayQuery::any, v.test, first), 0u) << v.name() << ": " << first;
+  }
+}
+
+TEST(WideTrace, MollerTrumboreAgreesWithTheWatertightTestAwayFromEdges) {
+  // The default test is not watertight; on random rays it finds the same hits as the
+  // watertight brute force except, rarely, on a shared edge.
+  const Mesh mesh = testing::random_mesh(1500, 42, false);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 1);
+  const RaySet set = ray_sets_for(mesh, flat, 3000)[1];
+  const WideTracer tracer(flat, mesh);
+  size_t differ = 0;
+  TraceCounters c;
+  for (const Ray& r : set.rays) {
+    const Hit a = tracer.closest(r, c), b = brute_force_closest(mesh, r);
+    if (a.triangle_id != b.triangle_id) {
+      ++differ;
+    } else if (a.hit()) {
+      EXPECT_NEAR(a.t, b.t, 1e-4f * std::max(1.0f, b.t));
+    }
+  }
+  EXPECT_LE(differ, set.rays.size() / 1000);
+}
+
+TEST(WideTrace, OneLeafTreeAndRejectedTrees) {
+  Mesh mesh = testing::random_mesh(3, 43, false);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::object_median, 8);
+  ASSERT_EQ(flat.nodes.size(), 1u);
+  const std::vector<RaySet> sets = ray_sets_for(mesh, flat, 500, {RayKind::random});  // a camera may see nothing
+  expect_all_variants_match(flat, mesh, expected_hits(mesh, sets), "one leaf");
+  Mesh fewer = mesh;
+  fewer.indices.resize(3);
+  EXPECT_THROW(WideBvh(flat, fewer), Error);
+  const Mesh big = testing::random_mesh(100, 44, false);
+  EXPECT_THROW(WideBvh(built(big, make_references(big), BuilderKind::object_median, 100), big), Error);
+}
+
+}  // namespace
+}  // namespace bvhopt
