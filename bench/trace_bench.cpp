@@ -6,10 +6,18 @@
 //   trace_bench [--scenes DIR] [--scene FILE]... [--count N] [--repeats R]
 //               [--kinds primary,random,ao] [--optimizers] [--quick] [--opt-seconds S]
 //               [--best-seconds S] [--best-leaf N] [--json FILE]
+//               [--no-wide] [--wide-variants] [--fit-costs]
 //
 // The row "best" is the tree a user would trace: sweep SAH, insertion optimization for
 // --best-seconds (default 10), compaction into leaves of up to --best-leaf (default 8) with
 // the default c_T/c_I. --quick keeps only sweep-l1 and best.
+//
+// Wide rows (unless --no-wide): the best tree and the sweep-l1 tree collapsed SAH-optimally
+// into bvh8 and bvh4 and traced by the wide tracer (the ISA default_isa() picks), the best
+// bvh8 also on 2 threads, beside Embree MEDIUM and HIGH. --wide-variants adds the best bvh8
+// with the other choices: distance-sorted children, the watertight triangle test, the greedy
+// collapse and every ISA the CPU has. --fit-costs prints, per row, the wide tracer's nodes and
+// blocks per ray beside its ns/ray, the data the wide cost model is calibrated from.
 //
 // Every figure is the median of R timed passes; the candidates are timed round-robin within
 // each repeat so machine load drifts alike over all of them. Ratios are ours / Embree's.
@@ -53,6 +61,7 @@
 #include "bvhopt/scene_file.h"
 #include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
+#include "bvhopt/wide_tracer.h"
 
 namespace bvhopt {
 namespace {
@@ -75,6 +84,9 @@ struct Options {
   double best_seconds = 10.0;
   uint32_t best_leaf = 8;
   std::string json_path;
+  bool wide = true;
+  bool wide_variants = false;
+  bool fit_costs = false;
 };
 
 Options parse(int argc, char** argv) {
@@ -88,6 +100,9 @@ Options parse(int argc, char** argv) {
     else if (a == "--json") o.json_path = args.value();
     else if (a == "--optimizers") o.optimizers = true;
     else if (a == "--quick") o.quick = true;
+    else if (a == "--no-wide") o.wide = false;
+    else if (a == "--wide-variants") o.wide_variants = true;
+    else if (a == "--fit-costs") o.fit_costs = true;
     else if (a == "--wall") o.wall = true;
     else if (a == "--opt-seconds") o.opt_seconds = std::stod(args.value());
     else if (a == "--best-seconds") o.best_seconds = std::stod(args.value());
@@ -104,7 +119,7 @@ Options parse(int argc, char** argv) {
                    "            [--kinds primary,random,ao,path,shadow] [--optimizers] [--opt-seconds S]\n"
                    "            [--quick] [--wall]   (only the leaf-1 sweep tree and best)\n"
                    "            [--best-seconds S] [--best-leaf N]   (the 'best' row; S = 0 drops it)\n"
-                   "            [--json FILE]\n";
+                   "            [--json FILE] [--no-wide] [--wide-variants] [--fit-costs]\n";
       std::exit(0);
     } else {
       throw Error("trace_bench: unknown option '" + a + "'");
@@ -168,12 +183,12 @@ struct EmbreeScene {
   RTCScene scene = nullptr;
   double build_seconds = 0.0;
 
-  explicit EmbreeScene(const Mesh& mesh) {
+  explicit EmbreeScene(const Mesh& mesh, RTCBuildQuality quality = RTC_BUILD_QUALITY_MEDIUM) {
     device = rtcNewDevice("threads=1");
     if (!device) throw Error("embree: rtcNewDevice failed");
     build_seconds = seconds_of([&] {
       scene = rtcNewScene(device);
-      rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
+      rtcSetSceneBuildQuality(scene, quality);
       RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
       auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                                              3 * sizeof(float), mesh.vertex_count()));
@@ -257,7 +272,40 @@ struct Tree {
   double sah = 0.0;
   double seconds = 0.0;  // build (+ optimize) time
   std::unique_ptr<Tracer> tracer;
+  FlatBvh flat;
 };
+
+// A tree in a wide layout, as the wide rows trace it.
+struct WideTree {
+  std::string name;  // e.g. best-bvh8
+  const Tree* from;
+  std::unique_ptr<WideTracer> tracer;
+  double layout_seconds = 0.0;  // collapse + layout
+};
+
+void trace_wide(const WideTracer& w, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits) {
+  hits.resize(rays.size());
+  constexpr size_t kBlock = 256;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), kBlock), [&](const tbb::blocked_range<size_t>& r) {
+    TraceCounters c;
+    if (query == RayQuery::closest) {
+      w.closest(rays.data() + r.begin(), r.size(), hits.data() + r.begin(), c);
+      return;
+    }
+    uint8_t any[kBlock];
+    for (size_t b = r.begin(); b < r.end(); b += kBlock) {
+      const size_t n = std::min(kBlock, r.end() - b);
+      w.any(rays.data() + b, n, any, c);
+      for (size_t i = 0; i < n; ++i) hits[b + i] = any[i] ? Hit{0.0f, 0.0f, 0.0f, 0} : Hit{};
+    }
+  });
+}
+
+// Bytes per triangle of the binary trace layout (a 64-byte TraceNode per inner node, 36 bytes of
+// vertices and a 4-byte id per leaf entry).
+double binary_bytes_per_triangle(const Tracer& t, const FlatBvh& flat) {
+  return (64.0 * double(t.node_count()) + 40.0 * double(flat.triangle_ids.size())) / double(t.triangle_count());
+}
 
 // Fraction of rays on which two tracers agree: both miss, or both hit at distances within
 // 1e-4 relative (different triangles at one distance are a tie, not a disagreement).
@@ -270,6 +318,68 @@ double agreement(const std::vector<Hit>& a, const std::vector<Hit>& b, RayQuery 
       ++same;
   }
   return a.empty() ? 1.0 : double(same) / double(a.size());
+}
+
+// The wide rows' tracers: bvh8 and bvh4 of the best and the sweep-l1 trees, and with
+// `variants` the other choices for the best bvh8.
+std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mesh, bool variants) {
+  std::vector<WideTree> out;
+  auto add = [&](const Tree& t, const std::string& suffix, WideTracerOptions o) {
+    WideTree w;
+    w.name = t.name + "-" + suffix;
+    w.from = &t;
+    w.layout_seconds = seconds_of([&] { w.tracer = std::make_unique<WideTracer>(t.flat, mesh, o); });
+    out.push_back(std::move(w));
+  };
+  for (const char* name : {"best", "sweep-l1"}) {
+    for (const Tree& t : trees) {
+      if (t.name != name) continue;
+      for (uint32_t width : {8u, 4u}) {
+        WideTracerOptions o;
+        o.layout.collapse.width = width;
+        add(t, "bvh" + std::to_string(width), o);
+      }
+      if (!variants || t.name != "best") continue;
+      WideTracerOptions o;
+      o.near_first = NearFirst::distance_sort;
+      add(t, "bvh8-sorted", o);
+      o = {};
+      o.layout.test = TriangleTest::watertight;
+      add(t, "bvh8-watertight", o);
+      o = {};
+      o.layout.collapse.method = CollapseMethod::greedy;
+      add(t, "bvh8-greedy", o);
+      for (Isa isa : {Isa::sse42, Isa::avx2, Isa::avx512}) {
+        if (!isa_supported(isa)) continue;
+        o = {};
+        o.isa = isa;
+        add(t, "bvh8-" + std::string(isa_name(isa)), o);
+      }
+    }
+  }
+  return out;
+}
+
+template <class Mrays>
+nlohmann::json wide_rows(const std::vector<WideTree>& wide, const std::vector<Ray>& rays, RayQuery query,
+                         const Mrays& mrays, double embree_1t, bool fit_costs) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (const WideTree& w : wide) {
+    const double mr = mrays(w.name);
+    const WideLayoutStats& st = w.tracer->layout().stats();
+    TraceCounters c;
+    std::vector<Hit> hits(rays.size());
+    w.tracer->closest(rays.data(), rays.size(), hits.data(), c);
+    const double steps = double(c.steps) / double(rays.size()), blocks = double(c.triangle_tests) / 4.0 / double(rays.size());
+    std::printf("%-8s %8s %6s | %-16s %7.2f %7s %7s | %7.2f   (wide SAH %.2f, steps %.1f, blocks %.1f%s)\n", "", "", "",
+                w.name.c_str(), mr, "", "", embree_1t > 0 ? mr / embree_1t : 0.0, st.sah_cost, steps, blocks,
+                fit_costs ? (", ns/ray " + std::to_string(1e3 / mr)).c_str() : "");
+    rows.push_back({{"tree", w.name}, {"isa", std::string(isa_name(w.tracer->isa()))}, {"wide_sah", st.sah_cost},
+                    {"bytes", st.bytes}, {"layout_seconds", w.layout_seconds}, {"mrays_1t", mr},
+                    {"ratio_1t", embree_1t > 0 ? mr / embree_1t : 0.0}, {"steps_mean", steps}, {"blocks_mean", blocks},
+                    {"query", query == RayQuery::any ? "any" : "closest"}});
+  }
+  return rows;
 }
 
 int run(const Options& opt) {
@@ -297,7 +407,8 @@ int run(const Options& opt) {
       t.name = name;
       t.sah = sah_cost(bvh);
       t.seconds = secs;
-      t.tracer = std::make_unique<Tracer>(finalize(bvh, refs), mesh);
+      t.flat = finalize(bvh, refs);
+      t.tracer = std::make_unique<Tracer>(t.flat, mesh);
       trees.push_back(std::move(t));
     };
     Bvh sweep1;
@@ -355,8 +466,19 @@ int run(const Options& opt) {
     }
 #ifdef BVHOPT_HAVE_EMBREE
     const EmbreeScene embree(mesh);
+    const EmbreeScene embree_high(mesh, RTC_BUILD_QUALITY_HIGH);
 #endif
     std::printf("\n## %s: %zu triangles\n", scene.c_str(), mesh.triangle_count());
+    std::vector<WideTree> wide;
+    if (opt.wide) wide = wide_trees(trees, mesh, opt.wide_variants);
+    for (const WideTree& w : wide) {
+      const WideLayoutStats& st = w.tracer->layout().stats();
+      std::printf("# %-22s wide SAH %.3f, %.1f B/triangle (binary %.1f), collapse+layout %.1f ms = %.1f%% of the "
+                  "sweep build, isa %s\n",
+                  w.name.c_str(), st.sah_cost, double(st.bytes) / double(mesh.triangle_count()),
+                  binary_bytes_per_triangle(*w.from->tracer, w.from->flat), 1e3 * w.layout_seconds,
+                  100.0 * w.layout_seconds / trees[0].seconds, std::string(isa_name(w.tracer->isa())).c_str());
+    }
     std::printf("%-8s %8s %6s | %-16s %7s %7s %7s | %7s %7s %7s %7s | %6s %6s | %6s\n", "rays", "count", "hit%",
                 "tree", "1t", "dist1t", "embr1t", "ratio1", "2t", "embr2t", "ratio2", "2t/1t", "steps", "agree");
     for (RayKind kind : opt.kinds) {
@@ -394,7 +516,15 @@ int run(const Options& opt) {
       for (int th : {1, 2})
         cands.push_back({th == 1 ? "embree1" : "embree2", th,
                          [&](std::vector<Hit>& h) { embree.trace(rays, set.query, h); }, {}});
+      cands.push_back({"embreeH1", 1, [&](std::vector<Hit>& h) { embree_high.trace(rays, set.query, h); }, {}});
 #endif
+      for (const WideTree& w : wide) {
+        const WideTracer* wt = w.tracer.get();
+        cands.push_back({w.name, 1, [=, &rays, &set](std::vector<Hit>& h) { trace_wide(*wt, rays, set.query, h); }, {}});
+        if (w.name == "best-bvh8")
+          cands.push_back({"best-bvh8-2t", 2,
+                           [=, &rays, &set](std::vector<Hit>& h) { trace_wide(*wt, rays, set.query, h); }, {}});
+      }
       std::vector<Hit> hits;
       for (int r = 0; r < opt.repeats; ++r)
         for (Candidate& c : cands) {
@@ -461,6 +591,15 @@ int run(const Options& opt) {
                       "", e1 > 0 ? mr / e1 : 0.0, t.sah);
       }
       row["trees"] = tree_rows;
+      row["wide"] = wide_rows(wide, rays, set.query, mrays, e1, opt.fit_costs);
+#ifdef BVHOPT_HAVE_EMBREE
+      row["embree_high_1t_mrays"] = mrays("embreeH1");
+      std::printf("%-8s %8s %6s | %-16s %7.2f %7s %7s | %7.2f   (Embree HIGH)\n", "", "", "", "embree-high",
+                  mrays("embreeH1"), "", "", e1 > 0 ? mrays("embreeH1") / e1 : 0.0);
+#endif
+      if (!wide.empty() && wide[0].name == "best-bvh8")
+        std::printf("%-8s best-bvh8 on 2 threads: %.2f Mrays/s, %.2fx its 1 thread\n", "", mrays("best-bvh8-2t"),
+                    mrays("best-bvh8-2t") / mrays("best-bvh8"));
       row["sah_vs_time_correlation"] = pearson(costs, ns_per_ray);
       std::printf("%-8s correlation(SAH cost, ns/ray) over %zu trees: %.3f   (sweep-l1 SAH %.2f)\n", "",
                   trees.size(), pearson(costs, ns_per_ray), trees[0].sah);

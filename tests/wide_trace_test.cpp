@@ -170,14 +170,23 @@ TEST(WideTrace, EveryOptimizerMatchesBruteForce) {
   const Mesh mesh = testing::random_mesh(800, 22, true);
   const PrimitiveRefs refs = make_references(mesh);
   const std::vector<RaySet> sets = ray_sets_for(mesh, built(mesh, refs, BuilderKind::sweep_sah, 1), 1200);
+  InsertionConfig insertion;
+  insertion.max_passes = 20;
+  HillClimbConfig hill;
+  hill.limits.max_passes = 20;
+  AnnealConfig anneal_config;
+  anneal_config.schedule_passes = 30;
+  anneal_config.period = 10;
+  CollapseConfig compact;
+  compact.max_leaf_size = 8;
   const std::vector<std::pair<std::string, std::function<void(Bvh&)>>> optimizers = {
-      {"insertion", [](Bvh& b) { optimize_insertion(b, {.max_passes = 20}); }},
-      {"hill-climb", [](Bvh& b) { hill_climb(b, {.limits = {.max_passes = 20}}); }},
-      {"anneal", [](Bvh& b) { anneal(b, {.schedule_passes = 30, .period = 10}); }},
+      {"insertion", [&](Bvh& b) { optimize_insertion(b, insertion); }},
+      {"hill-climb", [&](Bvh& b) { hill_climb(b, hill); }},
+      {"anneal", [&](Bvh& b) { anneal(b, anneal_config); }},
       {"insertion+collapse",
-       [](Bvh& b) {
-         optimize_insertion(b, {.max_passes = 20});
-         collapse_leaves(b, {.max_leaf_size = 8});
+       [&](Bvh& b) {
+         optimize_insertion(b, insertion);
+         collapse_leaves(b, compact);
        }},
   };
   const std::vector<Expected> expected = expected_hits(mesh, sets);

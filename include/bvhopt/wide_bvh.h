@@ -98,21 +98,21 @@ inline constexpr uint32_t kWideMaxBlocks = 16;
 inline constexpr size_t kWideUnit = 32;  // bytes per offset unit
 
 // Child boxes as SoA rows lo_x, hi_x, lo_y, hi_y, lo_z, hi_z (padded outward, see
-// wide_layout.cpp). octant_rank[o]: for a ray whose direction signs are octant o (bit 0: x
-// negative, bit 1: y, bit 2: z), the visiting rank of each child, 3 bits per child (child c
-// in bits 3c..3c+2), nearest first along the octant's diagonal.
+// wide_layout.cpp). octant_order[o]: for a ray whose direction signs are octant o (bit 0: x
+// negative, bit 1: y, bit 2: z), the children nearest first along the octant's diagonal,
+// 3 bits each (the k-th nearest in bits 3k..3k+2); empty slots come last.
 struct alignas(64) Bvh8Node {
   float bounds[6][8];
   uint32_t child[8];
-  uint32_t octant_rank[8];
+  uint32_t octant_order[8];
 };
 static_assert(sizeof(Bvh8Node) == 256);
 
-// The same for 4 children in two cache lines; ranks 2 bits per child.
+// The same for 4 children in two cache lines; the order 2 bits per child.
 struct alignas(64) Bvh4Node {
   float bounds[6][4];
   uint32_t child[4];
-  uint8_t octant_rank[8];
+  uint8_t octant_order[8];
   uint8_t unused[8];
 };
 static_assert(sizeof(Bvh4Node) == 128);
@@ -152,7 +152,8 @@ class WideBvh {
   TriangleTest triangle_test() const { return test_; }
   const std::byte* data() const { return reinterpret_cast<const std::byte*>(arena_.data()); }
   uint32_t root() const { return root_; }  // child word of the root (an inner node)
-  // Stack entries a traversal may need at most (width - 1 per level of the deepest path).
+  // Stack entries a traversal may need at most (width - 1 per level of the deepest path, and
+  // room for the kernels' full-vector stores beyond the top).
   uint32_t stack_entries() const { return stack_entries_; }
   const WideLayoutStats& stats() const { return stats_; }
   size_t triangle_count() const { return mesh_triangles_; }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -63,13 +64,15 @@ struct NodeAccess;
 template <>
 struct NodeAccess<8> {
   using Node = Bvh8Node;
-  static void set_rank(Node& n, int octant, uint32_t child, uint32_t rank) { n.octant_rank[octant] |= rank << (3 * child); }
+  static void set_order(Node& n, int octant, uint32_t position, uint32_t child) {
+    n.octant_order[octant] |= child << (3 * position);
+  }
 };
 template <>
 struct NodeAccess<4> {
   using Node = Bvh4Node;
-  static void set_rank(Node& n, int octant, uint32_t child, uint32_t rank) {
-    n.octant_rank[octant] = uint8_t(n.octant_rank[octant] | (rank << (2 * child)));
+  static void set_order(Node& n, int octant, uint32_t position, uint32_t child) {
+    n.octant_order[octant] = uint8_t(n.octant_order[octant] | (child << (2 * position)));
   }
 };
 
@@ -99,6 +102,7 @@ class LayoutBuilder {
     }
     // Arena may have moved: take the node's address only now.
     fill_node(*arena_.template at<Node>(self), begin, end, words);
+    node_units_.push_back(self);
     stack_need = deepest + (end - begin) - 1;
     ++nodes_;
     return self;
@@ -113,9 +117,10 @@ class LayoutBuilder {
     const uint32_t first = wide_.leaf_begin[leaf], count = wide_.leaf_begin[leaf + 1] - first;
     const uint32_t blocks = (count + 3) / 4;
     if (blocks == 0 || blocks > kWideMaxBlocks) throw Error("wide layout: a leaf of " + std::to_string(count) + " triangles");
-    const uint32_t unit = arena_.reserve(blocks * sizeof(TriangleBlock), sizeof(TriangleBlock) % 64 == 0 ? 64 : 32);
+    ArenaWriter& target = separate_ ? leaf_arena_ : arena_;
+    const uint32_t unit = target.reserve(blocks * sizeof(TriangleBlock), sizeof(TriangleBlock) % 64 == 0 ? 64 : 32);
     for (uint32_t b = 0; b < blocks; ++b) {
-      TriangleBlock& block = arena_.template at<TriangleBlock>(unit)[b];
+      TriangleBlock& block = target.template at<TriangleBlock>(unit)[b];
       for (uint32_t lane = 0; lane < 4; ++lane) {
         const uint32_t id = wide_.leaf_triangles[first + std::min(4 * b + lane, count - 1)];
         const Triangle t = mesh_.triangle(id);
@@ -157,7 +162,7 @@ class LayoutBuilder {
       uint32_t order[W];
       for (uint32_t c = 0; c < W; ++c) order[c] = c;
       std::stable_sort(order, order + used, [&](uint32_t a, uint32_t b) { return dot(centre[a], s) < dot(centre[b], s); });
-      for (uint32_t r = 0; r < W; ++r) Access::set_rank(node, o, order[r], r);
+      for (uint32_t k = 0; k < W; ++k) Access::set_order(node, o, k, order[k]);
     }
   }
 
@@ -168,6 +173,22 @@ class LayoutBuilder {
   float pad_;
   ArenaWriter arena_;
   size_t nodes_ = 0, blocks_ = 0;
+
+ public:
+  bool separate_ = getenv("WIDE_SEP") != nullptr;
+  ArenaWriter leaf_arena_;
+  std::vector<uint32_t> node_units_;
+  void finish() {
+    if (!separate_) return;
+    const uint32_t base = arena_.reserve(0, 64);
+    for (uint32_t u : node_units_) {
+      Node& n = *arena_.template at<Node>(u);
+      for (uint32_t c = 0; c < W; ++c)
+        if (n.child[c] != kWideEmptyChild && (n.child[c] & kWideLeafFlag)) n.child[c] += base;
+    }
+    const uint32_t at = arena_.reserve(leaf_arena_.size(), 64);
+    std::memcpy(arena_.template at<std::byte>(at), leaf_arena_.data(), leaf_arena_.size());
+  }
 };
 
 }  // namespace
@@ -185,6 +206,7 @@ WideBvh::WideBvh(const FlatBvh& bvh, const Mesh& mesh, const WideLayoutOptions& 
   const ArenaWriter* arena = nullptr;
   auto run = [&](auto& builder) {
     root_ = builder.write(0, stack_entries_);
+    builder.finish();
     stats_.nodes = builder.nodes();
     stats_.blocks = builder.blocks();
     arena = &builder.arena();
@@ -198,7 +220,7 @@ WideBvh::WideBvh(const FlatBvh& bvh, const Mesh& mesh, const WideLayoutOptions& 
     LayoutBuilder<4> builder(wide, bvh, mesh, test_);
     run(builder);
   }
-  stack_entries_ += 1;
+  stack_entries_ += 1 + width_;
   stats_.leaves = wide.leaf_count();
   stats_.triangle_slots = 4 * stats_.blocks;
   stats_.bytes = arena_.size() * sizeof(Line);

@@ -29,7 +29,6 @@ constexpr float kExitScale = 1.0f + 2.0f * (3.0f * 0x1p-24f / (1.0f - 3.0f * 0x1
 inline float abs_f(float x) { return __builtin_fabsf(x); }
 inline float max_f(float a, float b) { return a > b ? a : b; }
 inline uint32_t lowest_bit(uint32_t m) { return uint32_t(__builtin_ctz(m)); }
-inline uint32_t highest_bit(uint32_t m) { return 31u - uint32_t(__builtin_clz(m)); }
 
 // Per-ray values, computed once.
 struct KernelRay {
@@ -196,7 +195,11 @@ inline bool offer_lanes(uint32_t mask, __m128 t, __m128 u, __m128 v, const uint3
   return any;
 }
 
-// Moller-Trumbore with the operation order of brute_force_closest_mt.
+// Moller-Trumbore with the operation order of brute_force_closest_mt. The barycentric and
+// distance numerators are compared against |det| before any division (their signs flipped
+// with det's), so a block the ray misses costs no division; only blocks with a lane inside
+// the triangle and not beyond the current hit divide. The distance pre-filter is widened by
+// 2^-20 so it never rejects a lane the exact test after the division would accept.
 inline __attribute__((always_inline)) bool block_moller_trumbore(const TriangleBlock& b, const KernelRay& r, BestHit& best) {
   const __m128 dx = _mm_set1_ps(r.dir[0]), dy = _mm_set1_ps(r.dir[1]), dz = _mm_set1_ps(r.dir[2]);
   const __m128 e1x = _mm_load_ps(b.p[3]), e1y = _mm_load_ps(b.p[4]), e1z = _mm_load_ps(b.p[5]);
@@ -208,22 +211,26 @@ inline __attribute__((always_inline)) bool block_moller_trumbore(const TriangleB
   const __m128 tx = _mm_sub_ps(_mm_set1_ps(r.org[0]), _mm_load_ps(b.p[0]));
   const __m128 ty = _mm_sub_ps(_mm_set1_ps(r.org[1]), _mm_load_ps(b.p[1]));
   const __m128 tz = _mm_sub_ps(_mm_set1_ps(r.org[2]), _mm_load_ps(b.p[2]));
-  const __m128 uu = _mm_add_ps(_mm_add_ps(_mm_mul_ps(tx, px), _mm_mul_ps(ty, py)), _mm_mul_ps(tz, pz));
+  const __m128 sign = _mm_and_ps(det, _mm_set1_ps(-0.0f));
+  const __m128 adet = _mm_xor_ps(det, sign);
+  const __m128 uu = _mm_xor_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(tx, px), _mm_mul_ps(ty, py)), _mm_mul_ps(tz, pz)), sign);
   const __m128 qx = _mm_sub_ps(_mm_mul_ps(ty, e1z), _mm_mul_ps(tz, e1y));
   const __m128 qy = _mm_sub_ps(_mm_mul_ps(tz, e1x), _mm_mul_ps(tx, e1z));
   const __m128 qz = _mm_sub_ps(_mm_mul_ps(tx, e1y), _mm_mul_ps(ty, e1x));
-  const __m128 vv = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, qx), _mm_mul_ps(dy, qy)), _mm_mul_ps(dz, qz));
-  const __m128 tt = _mm_add_ps(_mm_add_ps(_mm_mul_ps(e2x, qx), _mm_mul_ps(e2y, qy)), _mm_mul_ps(e2z, qz));
-  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), det);
-  const __m128 u = _mm_mul_ps(uu, inv), v = _mm_mul_ps(vv, inv), t = _mm_mul_ps(tt, inv);
+  const __m128 vv = _mm_xor_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, qx), _mm_mul_ps(dy, qy)), _mm_mul_ps(dz, qz)), sign);
+  const __m128 tt = _mm_xor_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(e2x, qx), _mm_mul_ps(e2y, qy)), _mm_mul_ps(e2z, qz)), sign);
   const __m128 zero = _mm_setzero_ps();
-  __m128 ok = _mm_and_ps(_mm_cmpneq_ps(det, zero), _mm_cmpge_ps(u, zero));
-  ok = _mm_and_ps(ok, _mm_cmpge_ps(v, zero));
-  ok = _mm_and_ps(ok, _mm_cmple_ps(_mm_add_ps(u, v), _mm_set1_ps(1.0f)));
+  __m128 ok = _mm_and_ps(_mm_cmpneq_ps(det, zero), _mm_cmpge_ps(uu, zero));
+  ok = _mm_and_ps(ok, _mm_cmpge_ps(vv, zero));
+  ok = _mm_and_ps(ok, _mm_cmple_ps(_mm_add_ps(uu, vv), adet));
+  ok = _mm_and_ps(ok, _mm_cmple_ps(tt, _mm_mul_ps(adet, _mm_set1_ps(best.t * (1.0f + 0x1p-20f)))));
+  if (_mm_movemask_ps(ok) == 0) return false;
+  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), adet);
+  const __m128 t = _mm_mul_ps(tt, inv);
   ok = _mm_and_ps(ok, _mm_cmpge_ps(t, _mm_set1_ps(r.tmin)));
   ok = _mm_and_ps(ok, _mm_cmple_ps(t, _mm_set1_ps(best.t)));
   const uint32_t mask = uint32_t(_mm_movemask_ps(ok));
-  return mask != 0 && offer_lanes(mask, t, u, v, b.id, best);
+  return mask != 0 && offer_lanes(mask, t, _mm_mul_ps(uu, inv), _mm_mul_ps(vv, inv), b.id, best);
 }
 
 // Woop et al.'s watertight test with the operation order of the scalar one in traversal.cpp,
@@ -265,11 +272,12 @@ inline bool block_watertight(const TriangleBlock& b, const KernelRay& r, BestHit
   const __m128 neg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(U, zero), _mm_cmplt_ps(V, zero)), _mm_cmplt_ps(W, zero));
   const __m128 pos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(U, zero), _mm_cmpgt_ps(V, zero)), _mm_cmpgt_ps(W, zero));
   const __m128 det = _mm_add_ps(_mm_add_ps(U, V), W);
+  __m128 ok = _mm_andnot_ps(_mm_and_ps(neg, pos), _mm_cmpneq_ps(det, zero));
+  if (_mm_movemask_ps(ok) == 0) return false;
   const __m128 T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, _mm_mul_ps(sz, az)), _mm_mul_ps(V, _mm_mul_ps(sz, bz))),
                               _mm_mul_ps(W, _mm_mul_ps(sz, cz)));
   const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), det);
   const __m128 t = _mm_mul_ps(T, inv);
-  __m128 ok = _mm_andnot_ps(_mm_and_ps(neg, pos), _mm_cmpneq_ps(det, zero));
   ok = _mm_and_ps(ok, _mm_cmpge_ps(t, _mm_set1_ps(r.tmin)));
   ok = _mm_and_ps(ok, _mm_cmple_ps(t, _mm_set1_ps(best.t)));
   const uint32_t mask = uint32_t(_mm_movemask_ps(ok));
@@ -283,12 +291,14 @@ struct WideNode;
 template <>
 struct WideNode<8> {
   using Node = Bvh8Node;
-  static uint32_t rank(const Node& n, uint32_t octant, uint32_t c) { return (n.octant_rank[octant] >> (3 * c)) & 7u; }
+  static constexpr uint32_t kBits = 3;
+  static uint32_t order(const Node& n, uint32_t octant) { return n.octant_order[octant]; }
 };
 template <>
 struct WideNode<4> {
   using Node = Bvh4Node;
-  static uint32_t rank(const Node& n, uint32_t octant, uint32_t c) { return (n.octant_rank[octant] >> (2 * c)) & 3u; }
+  static constexpr uint32_t kBits = 2;
+  static uint32_t order(const Node& n, uint32_t octant) { return n.octant_order[octant]; }
 };
 
 template <class T>
@@ -296,59 +306,94 @@ inline const T* at_unit(const std::byte* arena, uint32_t word) {
   return reinterpret_cast<const T*>(arena + size_t(word & kWideOffsetMask) * kWideUnit);
 }
 
-// Two or more children entered (`first` and the bits of `rest`): the nearest becomes the
-// next node, the others go on the stack farthest first.
+// The traversal stack (two arrays, see Batch).
+struct Stack {
+  uint32_t* words;
+  float* t;
+  uint32_t size = 0;
+  void push(uint32_t word, float tn) {
+    words[size] = word;
+    t[size] = tn;
+    ++size;
+  }
+};
+
+// Two or more children entered (the bits of `mask`): the nearest is returned as the next
+// node, the others go on the stack farthest first, so the next pop is the next nearest.
 template <uint32_t W, NearFirst kOrder>
 inline __attribute__((always_inline)) uint32_t order_children(const typename WideNode<W>::Node& n, uint32_t octant,
-                                                              uint32_t first, uint32_t rest, const float* tnear,
-                                                              StackEntry* stack, uint32_t& sp) {
-  if constexpr (kOrder == NearFirst::octant_order) {
-    // Compaction: each entered child moves to its rank's slot; ranks then pop off the mask.
-    uint32_t slot[W];
-    uint32_t ranks = 0;
-    const uint32_t r0 = WideNode<W>::rank(n, octant, first);
-    slot[r0] = first;
-    ranks |= 1u << r0;
-    for (; rest; rest &= rest - 1) {
-      const uint32_t c = lowest_bit(rest), r = WideNode<W>::rank(n, octant, c);
-      slot[r] = c;
-      ranks |= 1u << r;
-    }
-    const uint32_t nearest = slot[lowest_bit(ranks)];
-    ranks &= ranks - 1;
-    for (; ranks; ) {
-      const uint32_t r = highest_bit(ranks);
-      ranks ^= 1u << r;
-      stack[sp++] = {n.child[slot[r]], tnear[slot[r]]};
-    }
-    return n.child[nearest];
-  } else {
+                                                              uint32_t mask, const float* tnear, Stack& stack) {
+  if constexpr (kOrder == NearFirst::distance_sort) {
     // Insertion into the stack top, kept sorted with the nearest on top.
-    const uint32_t base = sp;
-    uint32_t all = rest | (1u << first);
-    for (; all; all &= all - 1) {
-      const uint32_t c = lowest_bit(all);
-      const StackEntry e{n.child[c], tnear[c]};
-      uint32_t i = sp++;
-      while (i > base && stack[i - 1].t < e.t) {
-        stack[i] = stack[i - 1];
+    const uint32_t base = stack.size;
+    for (; mask; mask &= mask - 1) {
+      const uint32_t c = lowest_bit(mask);
+      const uint32_t word = n.child[c];
+      const float t = tnear[c];
+      uint32_t i = stack.size++;
+      while (i > base && stack.t[i - 1] < t) {
+        stack.words[i] = stack.words[i - 1];
+        stack.t[i] = stack.t[i - 1];
         --i;
       }
-      stack[i] = e;
+      stack.words[i] = word;
+      stack.t[i] = t;
     }
-    return stack[--sp].word;
+    return stack.words[--stack.size];
+  } else {
+#if defined(__AVX512VL__)
+    if constexpr (W == 8) {
+      // The octant's order, farthest first, permutes children, distances and the entered
+      // mask; compression packs the entered ones; one store pushes them all.
+      const __m256i shifts = _mm256_setr_epi32(21, 18, 15, 12, 9, 6, 3, 0);
+      const __m256i far_first =
+          _mm256_and_si256(_mm256_srlv_epi32(_mm256_set1_epi32(int(n.octant_order[octant])), shifts), _mm256_set1_epi32(7));
+      const __mmask8 entered = _mm256_movepi32_mask(_mm256_permutexvar_epi32(far_first, _mm256_movm_epi32(__mmask8(mask))));
+      const __m256i words = _mm256_maskz_compress_epi32(
+          entered, _mm256_permutexvar_epi32(far_first, _mm256_load_si256(reinterpret_cast<const __m256i*>(n.child))));
+      const __m256 dist = _mm256_maskz_compress_ps(entered, _mm256_permutexvar_ps(far_first, _mm256_load_ps(tnear)));
+      const uint32_t count = uint32_t(__builtin_popcount(entered));
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(stack.words + stack.size), words);
+      _mm256_storeu_ps(stack.t + stack.size, dist);
+      stack.size += count - 1;
+      return uint32_t(_mm_cvtsi128_si32(
+          _mm256_castsi256_si128(_mm256_permutexvar_epi32(_mm256_set1_epi32(int(count - 1)), words))));
+    }
+#endif
+    // Walk the octant's order from the far end, pushing the entered children; the last one
+    // pushed is the nearest, taken straight back off.
+    const uint32_t order = WideNode<W>::order(n, octant);
+    for (uint32_t k = W; k-- > 0;) {
+      const uint32_t c = (order >> (WideNode<W>::kBits * k)) & (W - 1);
+      if (mask & (1u << c)) stack.push(n.child[c], tnear[c]);
+    }
+    return stack.words[--stack.size];
   }
+}
+
+// The blocks of one leaf; whether any gave a closer hit (any hit at all, for any-hit).
+template <TriangleTest kTest>
+inline __attribute__((always_inline)) bool test_leaf(const std::byte* arena, uint32_t word, const KernelRay& r,
+                                                     BestHit& best, uint32_t& tests) {
+  const TriangleBlock* blocks = at_unit<TriangleBlock>(arena, word);
+  const uint32_t count = ((word >> 27) & 15u) + 1;
+  tests += 4 * count;
+  bool found = false;
+  for (uint32_t i = 0; i < count; ++i)
+    found |= kTest == TriangleTest::watertight ? block_watertight(blocks[i], r, best)
+                                               : block_moller_trumbore(blocks[i], r, best);
+  return found;
 }
 
 template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kAny>
 bool traverse(const Batch& batch, const Ray& ray, Hit& out, TraceCounters& counters) {
   using Node = typename WideNode<W>::Node;
   const std::byte* arena = batch.arena;
-  StackEntry* stack = batch.stack;
+  Stack stack{batch.stack_words, batch.stack_t};
   const KernelRay r = make_ray(ray);
   BestHit best;
   best.t = ray.tmax < kLargest ? ray.tmax : kLargest;
-  uint32_t steps = 0, tests = 0, sp = 0;
+  uint32_t steps = 0, tests = 0;
   bool found = false;
   alignas(32) float tnear[W];
   uint32_t word = batch.root;
@@ -358,33 +403,25 @@ bool traverse(const Batch& batch, const Ray& ray, Hit& out, TraceCounters& count
       ++steps;
       uint32_t mask = slab_test<W>(n.bounds, r, best.t, tnear);
       if (mask == 0) goto pop;
-      const uint32_t first = lowest_bit(mask);
-      mask &= mask - 1;
-      if (mask == 0) {
-        word = n.child[first];  // one child: no stack traffic
+      if ((mask & (mask - 1)) == 0) {
+        word = n.child[lowest_bit(mask)];  // one child: no stack traffic
         continue;
       }
-      word = order_children<W, kOrder>(n, r.octant, first, mask, tnear, stack, sp);
+      word = order_children<W, kOrder>(n, r.octant, mask, tnear, stack);
     }
     {
       ++steps;
-      const TriangleBlock* blocks = at_unit<TriangleBlock>(arena, word);
-      const uint32_t count = ((word >> 27) & 15u) + 1;
-      tests += 4 * count;
-      for (uint32_t i = 0; i < count; ++i) {
-        const bool hit = kTest == TriangleTest::watertight ? block_watertight(blocks[i], r, best)
-                                                          : block_moller_trumbore(blocks[i], r, best);
-        found |= hit;
-        if (kAny && hit) goto done;
-      }
+      const bool hit = test_leaf<kTest>(arena, word, r, best, tests);
+      found |= hit;
+      if (kAny && hit) goto done;
     }
   pop:
     for (;;) {
-      if (sp == 0) goto done;
-      --sp;
+      if (stack.size == 0) goto done;
+      --stack.size;
       // Entries pushed before a closer hit was found may now lie beyond it.
-      if (stack[sp].t <= best.t) {
-        word = stack[sp].word;
+      if (stack.t[stack.size] <= best.t) {
+        word = stack.words[stack.size];
         break;
       }
     }

@@ -12,11 +12,6 @@
 
 namespace bvhopt::wide_kernels {
 
-struct StackEntry {
-  uint32_t word;  // child word
-  float t;        // entry distance of its box
-};
-
 // One batch of rays through one layout. Exactly one of hits / any_hits is set.
 struct Batch {
   const std::byte* arena;
@@ -24,7 +19,10 @@ struct Batch {
   uint32_t width;  // 4 or 8
   TriangleTest test;
   NearFirst near_first;
-  StackEntry* stack;  // WideBvh::stack_entries() entries
+  // The traversal stack as two arrays of WideBvh::stack_entries() entries: child words and
+  // the entry distances of their boxes.
+  uint32_t* stack_words;
+  float* stack_t;
   const Ray* rays;
   size_t count;
   Hit* hits;          // closest hits

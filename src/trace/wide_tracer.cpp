@@ -34,13 +34,18 @@ WideTracer::WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOpt
 namespace {
 template <class Fill>
 void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, TraceCounters& counters, Fill&& fill) {
-  wide_kernels::StackEntry fixed[kFixedStack];
-  std::vector<wide_kernels::StackEntry> heap;
+  alignas(32) uint32_t fixed_words[kFixedStack];
+  alignas(32) float fixed_t[kFixedStack];
+  std::vector<uint32_t> heap_words;
+  std::vector<float> heap_t;
   wide_kernels::Batch b{};
-  b.stack = fixed;
+  b.stack_words = fixed_words;
+  b.stack_t = fixed_t;
   if (bvh.stack_entries() > kFixedStack) {
-    heap.resize(bvh.stack_entries());
-    b.stack = heap.data();
+    heap_words.resize(bvh.stack_entries());
+    heap_t.resize(bvh.stack_entries());
+    b.stack_words = heap_words.data();
+    b.stack_t = heap_t.data();
   }
   b.arena = bvh.data();
   b.root = bvh.root();
