@@ -126,6 +126,11 @@ struct alignas(32) TriangleBlock {
 };
 static_assert(sizeof(TriangleBlock) == 160);
 
+// The arena's storage unit (keeps the arena 64-byte aligned).
+struct alignas(64) WideArenaLine {
+  std::byte b[64];
+};
+
 struct WideLayoutOptions {
   CollapseOptions collapse;
   TriangleTest test = TriangleTest::moller_trumbore;
@@ -159,10 +164,7 @@ class WideBvh {
   size_t triangle_count() const { return mesh_triangles_; }
 
  private:
-  struct alignas(64) Line {
-    std::byte b[64];
-  };
-  std::vector<Line> arena_;
+  std::vector<WideArenaLine> arena_;
   uint32_t root_ = 0;
   uint32_t width_ = 8;
   TriangleTest test_ = TriangleTest::moller_trumbore;

@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
-#include <cstring>
 #include <limits>
 #include <string>
 
@@ -38,24 +36,29 @@ float box_padding(const FlatBvh& bvh) {
   return largest * 0x1p-17f;
 }
 
-// The arena as it is written: 32-byte units, nodes on 64-byte boundaries.
+// The arena as it is written: 32-byte units, nodes on 64-byte boundaries, in 64-byte lines
+// (so the storage itself is aligned). Reserved up front from the collapse's sizes.
 class ArenaWriter {
  public:
+  void reserve_total(size_t bytes) { lines_.reserve(bytes / 64 + 1); }
   uint32_t reserve(size_t bytes, size_t align) {
-    size_t at = (bytes_.size() + align - 1) / align * align;
+    const size_t at = (used_ + align - 1) / align * align;
     if ((at + bytes) / kWideUnit > kWideOffsetMask) throw Error("wide layout: the tree needs more than 4 GiB");
-    bytes_.resize(at + bytes, std::byte{0});
+    used_ = at + bytes;
+    if (lines_.size() * 64 < used_) lines_.resize((used_ + 63) / 64);
     return uint32_t(at / kWideUnit);
   }
   template <class T>
   T* at(uint32_t unit) {
-    return reinterpret_cast<T*>(bytes_.data() + size_t(unit) * kWideUnit);
+    return reinterpret_cast<T*>(reinterpret_cast<std::byte*>(lines_.data()) + size_t(unit) * kWideUnit);
   }
-  size_t size() const { return bytes_.size(); }
-  const std::byte* data() const { return bytes_.data(); }
+  size_t size() const { return lines_.size() * 64; }
+  const std::byte* data() const { return reinterpret_cast<const std::byte*>(lines_.data()); }
+  std::vector<WideArenaLine>& lines() { return lines_; }
 
  private:
-  std::vector<std::byte> bytes_;
+  std::vector<WideArenaLine> lines_;
+  size_t used_ = 0;
 };
 
 // Node-type specifics: where the boxes, child words and ranks of a W-wide node are.
@@ -83,7 +86,13 @@ class LayoutBuilder {
 
  public:
   LayoutBuilder(const CollapsedBvh& wide, const FlatBvh& bvh, const Mesh& mesh, TriangleTest test)
-      : wide_(wide), bvh_(bvh), mesh_(mesh), test_(test), pad_(box_padding(bvh)) {}
+      : wide_(wide), bvh_(bvh), mesh_(mesh), test_(test), pad_(box_padding(bvh)) {
+    // Upper bound: every node, and every leaf's blocks with a 64-byte alignment gap.
+    size_t bytes = wide.node_count() * sizeof(Node);
+    for (size_t l = 0; l < wide.leaf_count(); ++l)
+      bytes += (wide.leaf_begin[l + 1] - wide.leaf_begin[l] + 3) / 4 * sizeof(TriangleBlock) + 64;
+    arena_.reserve_total(bytes);
+  }
 
   // Writes the subtree of wide node w; returns its offset and the deepest stack it needs.
   uint32_t write(uint32_t w, uint32_t& stack_need) {
@@ -102,7 +111,6 @@ class LayoutBuilder {
     }
     // Arena may have moved: take the node's address only now.
     fill_node(*arena_.template at<Node>(self), begin, end, words);
-    node_units_.push_back(self);
     stack_need = deepest + (end - begin) - 1;
     ++nodes_;
     return self;
@@ -117,7 +125,7 @@ class LayoutBuilder {
     const uint32_t first = wide_.leaf_begin[leaf], count = wide_.leaf_begin[leaf + 1] - first;
     const uint32_t blocks = (count + 3) / 4;
     if (blocks == 0 || blocks > kWideMaxBlocks) throw Error("wide layout: a leaf of " + std::to_string(count) + " triangles");
-    ArenaWriter& target = separate_ ? leaf_arena_ : arena_;
+    ArenaWriter& target = arena_;
     const uint32_t unit = target.reserve(blocks * sizeof(TriangleBlock), sizeof(TriangleBlock) % 64 == 0 ? 64 : 32);
     for (uint32_t b = 0; b < blocks; ++b) {
       TriangleBlock& block = target.template at<TriangleBlock>(unit)[b];
@@ -161,7 +169,10 @@ class LayoutBuilder {
       const Vec3 s((o & 1) ? -1.0f : 1.0f, (o & 2) ? -1.0f : 1.0f, (o & 4) ? -1.0f : 1.0f);
       uint32_t order[W];
       for (uint32_t c = 0; c < W; ++c) order[c] = c;
-      std::stable_sort(order, order + used, [&](uint32_t a, uint32_t b) { return dot(centre[a], s) < dot(centre[b], s); });
+      float key[W];
+      for (uint32_t c = 0; c < used; ++c) key[c] = dot(centre[c], s);
+      for (uint32_t i = 1; i < used; ++i)  // insertion sort: at most 8, stable
+        for (uint32_t j = i; j > 0 && key[order[j]] < key[order[j - 1]]; --j) std::swap(order[j], order[j - 1]);
       for (uint32_t k = 0; k < W; ++k) Access::set_order(node, o, k, order[k]);
     }
   }
@@ -173,22 +184,6 @@ class LayoutBuilder {
   float pad_;
   ArenaWriter arena_;
   size_t nodes_ = 0, blocks_ = 0;
-
- public:
-  bool separate_ = getenv("WIDE_SEP") != nullptr;
-  ArenaWriter leaf_arena_;
-  std::vector<uint32_t> node_units_;
-  void finish() {
-    if (!separate_) return;
-    const uint32_t base = arena_.reserve(0, 64);
-    for (uint32_t u : node_units_) {
-      Node& n = *arena_.template at<Node>(u);
-      for (uint32_t c = 0; c < W; ++c)
-        if (n.child[c] != kWideEmptyChild && (n.child[c] & kWideLeafFlag)) n.child[c] += base;
-    }
-    const uint32_t at = arena_.reserve(leaf_arena_.size(), 64);
-    std::memcpy(arena_.template at<std::byte>(at), leaf_arena_.data(), leaf_arena_.size());
-  }
 };
 
 }  // namespace
@@ -203,15 +198,11 @@ WideBvh::WideBvh(const FlatBvh& bvh, const Mesh& mesh, const WideLayoutOptions& 
   const CollapsedBvh wide = collapse_to_wide(bvh, options.collapse);
   stats_.collapse_seconds = seconds_since(t0);
   t0 = std::chrono::steady_clock::now();
-  const ArenaWriter* arena = nullptr;
   auto run = [&](auto& builder) {
     root_ = builder.write(0, stack_entries_);
-    builder.finish();
     stats_.nodes = builder.nodes();
     stats_.blocks = builder.blocks();
-    arena = &builder.arena();
-    arena_.resize((arena->size() + 63) / 64);
-    std::memcpy(arena_.data(), arena->data(), arena->size());
+    arena_ = std::move(builder.arena().lines());
   };
   if (width_ == 8) {
     LayoutBuilder<8> builder(wide, bvh, mesh, test_);
@@ -223,7 +214,7 @@ WideBvh::WideBvh(const FlatBvh& bvh, const Mesh& mesh, const WideLayoutOptions& 
   stack_entries_ += 1 + width_;
   stats_.leaves = wide.leaf_count();
   stats_.triangle_slots = 4 * stats_.blocks;
-  stats_.bytes = arena_.size() * sizeof(Line);
+  stats_.bytes = arena_.size() * sizeof(WideArenaLine);
   stats_.sah_cost = wide.sah_cost;
   stats_.layout_seconds = seconds_since(t0);
 }
