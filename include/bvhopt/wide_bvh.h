@@ -5,6 +5,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <string_view>
 #include <vector>
 
@@ -126,11 +127,6 @@ struct alignas(32) TriangleBlock {
 };
 static_assert(sizeof(TriangleBlock) == 160);
 
-// The arena's storage unit (keeps the arena 64-byte aligned).
-struct alignas(64) WideArenaLine {
-  std::byte b[64];
-};
-
 struct WideLayoutOptions {
   CollapseOptions collapse;
   TriangleTest test = TriangleTest::moller_trumbore;
@@ -151,11 +147,15 @@ struct WideLayoutStats {
 // of one triangle (edge volume subdivision) are merged: each leaf holds a triangle once.
 class WideBvh {
  public:
+  struct FreeArena {  // the arena is allocated with posix_memalign
+    void operator()(std::byte* p) const;
+  };
+
   WideBvh(const FlatBvh& bvh, const Mesh& mesh, const WideLayoutOptions& options = {});
 
   uint32_t width() const { return width_; }
   TriangleTest triangle_test() const { return test_; }
-  const std::byte* data() const { return reinterpret_cast<const std::byte*>(arena_.data()); }
+  const std::byte* data() const { return arena_.get(); }
   uint32_t root() const { return root_; }  // child word of the root (an inner node)
   // Stack entries a traversal may need at most (width - 1 per level of the deepest path, and
   // room for the kernels' full-vector stores beyond the top).
@@ -164,7 +164,7 @@ class WideBvh {
   size_t triangle_count() const { return mesh_triangles_; }
 
  private:
-  std::vector<WideArenaLine> arena_;
+  std::unique_ptr<std::byte[], FreeArena> arena_;
   uint32_t root_ = 0;
   uint32_t width_ = 8;
   TriangleTest test_ = TriangleTest::moller_trumbore;

@@ -1,7 +1,11 @@
 // The wide layout: collapsed nodes written depth-first into one aligned arena, each node
 // followed by its leaf blocks, so a node and the triangles it points to share pages.
+#include <sys/mman.h>
+
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
+#include <cstring>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -36,29 +40,42 @@ float box_padding(const FlatBvh& bvh) {
   return largest * 0x1p-17f;
 }
 
-// The arena as it is written: 32-byte units, nodes on 64-byte boundaries, in 64-byte lines
-// (so the storage itself is aligned). Reserved up front from the collapse's sizes.
+// The arena as it is written: 32-byte units, nodes on 64-byte boundaries, in one block of
+// the size the collapse implies (an upper bound, computed before writing). Arenas of 2 MiB
+// or more are 2 MiB aligned and asked to be backed by huge pages: incoherent rays touch
+// nodes all over the arena, and with 4 KiB pages most node visits would also miss the TLB
+// (Embree allocates its BVH the same way).
 class ArenaWriter {
  public:
-  void reserve_total(size_t bytes) { lines_.reserve(bytes / 64 + 1); }
+  explicit ArenaWriter(size_t capacity) : capacity_((capacity + 63) / 64 * 64) {
+    constexpr size_t kHuge = size_t(2) << 20;
+    void* p = nullptr;
+    if (posix_memalign(&p, capacity_ >= kHuge ? kHuge : 64, std::max<size_t>(capacity_, 64)) != 0)
+      throw Error("wide layout: out of memory for " + std::to_string(capacity_) + " bytes");
+#ifdef MADV_HUGEPAGE
+    if (capacity_ >= kHuge) madvise(p, capacity_, MADV_HUGEPAGE);
+#endif
+    std::memset(p, 0, capacity_);
+    data_.reset(static_cast<std::byte*>(p));
+  }
   uint32_t reserve(size_t bytes, size_t align) {
     const size_t at = (used_ + align - 1) / align * align;
     if ((at + bytes) / kWideUnit > kWideOffsetMask) throw Error("wide layout: the tree needs more than 4 GiB");
+    if (at + bytes > capacity_) throw Error("wide layout: internal error, arena estimate too small");
     used_ = at + bytes;
-    if (lines_.size() * 64 < used_) lines_.resize((used_ + 63) / 64);
     return uint32_t(at / kWideUnit);
   }
   template <class T>
   T* at(uint32_t unit) {
-    return reinterpret_cast<T*>(reinterpret_cast<std::byte*>(lines_.data()) + size_t(unit) * kWideUnit);
+    return reinterpret_cast<T*>(data_.get() + size_t(unit) * kWideUnit);
   }
-  size_t size() const { return lines_.size() * 64; }
-  const std::byte* data() const { return reinterpret_cast<const std::byte*>(lines_.data()); }
-  std::vector<WideArenaLine>& lines() { return lines_; }
+  size_t size() const { return (used_ + 63) / 64 * 64; }
+  std::unique_ptr<std::byte[], WideBvh::FreeArena>& storage() { return data_; }
 
  private:
-  std::vector<WideArenaLine> lines_;
+  size_t capacity_;
   size_t used_ = 0;
+  std::unique_ptr<std::byte[], WideBvh::FreeArena> data_;
 };
 
 // Node-type specifics: where the boxes, child words and ranks of a W-wide node are.
@@ -86,12 +103,14 @@ class LayoutBuilder {
 
  public:
   LayoutBuilder(const CollapsedBvh& wide, const FlatBvh& bvh, const Mesh& mesh, TriangleTest test)
-      : wide_(wide), bvh_(bvh), mesh_(mesh), test_(test), pad_(box_padding(bvh)) {
-    // Upper bound: every node, and every leaf's blocks with a 64-byte alignment gap.
+      : wide_(wide), bvh_(bvh), mesh_(mesh), test_(test), pad_(box_padding(bvh)), arena_(arena_bound(wide)) {}
+
+  // Every node, and every leaf's blocks with a 64-byte alignment gap.
+  static size_t arena_bound(const CollapsedBvh& wide) {
     size_t bytes = wide.node_count() * sizeof(Node);
     for (size_t l = 0; l < wide.leaf_count(); ++l)
       bytes += (wide.leaf_begin[l + 1] - wide.leaf_begin[l] + 3) / 4 * sizeof(TriangleBlock) + 64;
-    arena_.reserve_total(bytes);
+    return bytes;
   }
 
   // Writes the subtree of wide node w; returns its offset and the deepest stack it needs.
@@ -188,6 +207,8 @@ class LayoutBuilder {
 
 }  // namespace
 
+void WideBvh::FreeArena::operator()(std::byte* p) const { std::free(p); }
+
 WideBvh::WideBvh(const FlatBvh& bvh, const Mesh& mesh, const WideLayoutOptions& options)
     : width_(options.collapse.width), test_(options.test), mesh_triangles_(mesh.triangle_count()) {
   for (uint32_t id : bvh.triangle_ids)
@@ -202,7 +223,8 @@ WideBvh::WideBvh(const FlatBvh& bvh, const Mesh& mesh, const WideLayoutOptions& 
     root_ = builder.write(0, stack_entries_);
     stats_.nodes = builder.nodes();
     stats_.blocks = builder.blocks();
-    arena_ = std::move(builder.arena().lines());
+    stats_.bytes = builder.arena().size();
+    arena_ = std::move(builder.arena().storage());
   };
   if (width_ == 8) {
     LayoutBuilder<8> builder(wide, bvh, mesh, test_);
@@ -214,7 +236,6 @@ WideBvh::WideBvh(const FlatBvh& bvh, const Mesh& mesh, const WideLayoutOptions& 
   stack_entries_ += 1 + width_;
   stats_.leaves = wide.leaf_count();
   stats_.triangle_slots = 4 * stats_.blocks;
-  stats_.bytes = arena_.size() * sizeof(WideArenaLine);
   stats_.sah_cost = wide.sah_cost;
   stats_.layout_seconds = seconds_since(t0);
 }
