@@ -17,7 +17,8 @@
 #include "bvhopt/insertion_optimizer.h"
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/references.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/testing/brute_force.h"
+#include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
 #include "bvhopt/wide_tracer.h"
 #include "test_support.h"
@@ -171,7 +172,7 @@ TEST(WideTrace, EveryOptimizerMatchesBruteForce) {
   const PrimitiveRefs refs = make_references(mesh);
   const std::vector<RaySet> sets = ray_sets_for(mesh, built(mesh, refs, BuilderKind::sweep_sah, 1), 1200);
   InsertionConfig insertion;
-  insertion.max_passes = 20;
+  insertion.limits.max_passes = 20;
   HillClimbConfig hill;
   hill.limits.max_passes = 20;
   AnnealConfig anneal_config;

@@ -10,7 +10,7 @@
 #include "bvhopt/finalize.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/ray.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
 #include "bvhopt/wide_bvh.h"
 
 namespace bvhopt {
@@ -63,10 +63,5 @@ class WideTracer {
   Isa isa_;
   NearFirst near_first_;
 };
-
-// Brute force over every triangle with the Moller-Trumbore test as the wide leaf blocks run
-// it (edges v1 - v0 and v2 - v0 in float, no fused operations): the oracle of the default
-// triangle test. Ties in t keep the lowest triangle id.
-Hit brute_force_closest_mt(const Mesh& mesh, const Ray& ray);
 
 }  // namespace bvhopt

@@ -16,6 +16,7 @@
 
 #include <cstdint>
 
+#include "bvhopt/ray_triangle.h"
 #include "trace/wide_kernels.h"
 
 namespace bvhopt::wide_kernels {
@@ -63,22 +64,15 @@ inline KernelRay make_ray(const Ray& ray) {
     r.octant |= (neg ? 1u : 0u) << a;
   }
   r.tmin = ray.tmin;
-  int kz = 0;
-  if (abs_f(d[1]) > abs_f(d[kz])) kz = 1;
-  if (abs_f(d[2]) > abs_f(d[kz])) kz = 2;
-  int kx = kz == 2 ? 0 : kz + 1;
-  int ky = kx == 2 ? 0 : kx + 1;
-  if (d[kz] < 0.0f) {
-    const int s = kx;
-    kx = ky;
-    ky = s;
-  }
-  r.kx = kx;
-  r.ky = ky;
-  r.kz = kz;
-  r.sx = d[kx] / d[kz];
-  r.sy = d[ky] / d[kz];
-  r.sz = 1.0f / d[kz];
+  // The watertight test's axis permutation and shear, from the one constructor (out of line,
+  // baseline code) the binary tracer uses too.
+  const WatertightRay w(ray);
+  r.kx = w.kx;
+  r.ky = w.ky;
+  r.kz = w.kz;
+  r.sx = w.shear_x;
+  r.sy = w.shear_y;
+  r.sz = w.shear_z;
   return r;
 }
 

@@ -6,7 +6,7 @@
 #include <cstdint>
 
 #include "bvhopt/ray.h"
-#include "bvhopt/traversal.h"
+#include "bvhopt/tracer.h"
 #include "bvhopt/wide_bvh.h"
 #include "bvhopt/wide_tracer.h"
 

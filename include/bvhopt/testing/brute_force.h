@@ -11,4 +11,9 @@ namespace bvhopt {
 Hit brute_force_closest(const Mesh& mesh, const Ray& ray);
 bool brute_force_any(const Mesh& mesh, const Ray& ray);
 
+// The same with the Moller-Trumbore test as the wide leaf blocks run it (edges v1 - v0 and
+// v2 - v0 in float, no fused operations, division deferred; wide_kernel.h): the oracle of
+// the wide tracer's default triangle test.
+Hit brute_force_closest_mt(const Mesh& mesh, const Ray& ray);
+
 }  // namespace bvhopt
