@@ -43,8 +43,9 @@ struct KernelRay {
   float sx, sy, sz;
 };
 
+template <TriangleTest kTest>
 inline KernelRay make_ray(const Ray& ray) {
-  KernelRay r;
+  KernelRay r{};
   const float d[3] = {ray.dir.x, ray.dir.y, ray.dir.z};
   const float o[3] = {ray.org.x, ray.org.y, ray.org.z};
   const float biggest = max_f(abs_f(d[0]), max_f(abs_f(d[1]), abs_f(d[2])));
@@ -65,14 +66,17 @@ inline KernelRay make_ray(const Ray& ray) {
   }
   r.tmin = ray.tmin;
   // The watertight test's axis permutation and shear, from the one constructor (out of line,
-  // baseline code) the binary tracer uses too.
-  const WatertightRay w(ray);
-  r.kx = w.kx;
-  r.ky = w.ky;
-  r.kz = w.kz;
-  r.sx = w.shear_x;
-  r.sy = w.shear_y;
-  r.sz = w.shear_z;
+  // baseline code) the binary tracer uses too; only when the blocks need it, since the call
+  // costs the Moller-Trumbore kernel some 10% (it spills the loop's vector registers).
+  if constexpr (kTest == TriangleTest::watertight) {
+    const WatertightRay w(ray);
+    r.kx = w.kx;
+    r.ky = w.ky;
+    r.kz = w.kz;
+    r.sx = w.shear_x;
+    r.sy = w.shear_y;
+    r.sz = w.shear_z;
+  }
   return r;
 }
 
@@ -384,7 +388,7 @@ bool traverse(const Batch& batch, const Ray& ray, Hit& out, TraceCounters& count
   using Node = typename WideNode<W>::Node;
   const std::byte* arena = batch.arena;
   Stack stack{batch.stack_words, batch.stack_t};
-  const KernelRay r = make_ray(ray);
+  const KernelRay r = make_ray<kTest>(ray);
   BestHit best;
   best.t = ray.tmax < kLargest ? ray.tmax : kLargest;
   uint32_t steps = 0, tests = 0;
