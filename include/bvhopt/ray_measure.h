@@ -8,6 +8,7 @@
 
 #include "bvhopt/mesh.h"
 #include "bvhopt/ray.h"
+#include "bvhopt/any_tracer.h"
 #include "bvhopt/tracer.h"
 
 namespace bvhopt {
@@ -15,6 +16,9 @@ namespace bvhopt {
 // Traces every ray, spread over the threads oneTBB allows (tbb::parallel_for over blocks
 // of `block` rays). For RayQuery::any only triangle_id tells hit (any id) or miss, and the
 // id is of whichever triangle was found first. `counters`, when given, gets one entry per ray.
+// Without `counters` a block is traced in one call (AnyTracer's batch form).
+void trace_rays(const AnyTracer& tracer, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits,
+                std::vector<TraceCounters>* counters = nullptr, size_t block = 256);
 void trace_rays(const Tracer& tracer, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits,
                 std::vector<TraceCounters>* counters = nullptr, ChildOrder order = ChildOrder::split_axis,
                 size_t block = 256);
@@ -29,7 +33,7 @@ struct CountDistribution {
 CountDistribution distribution_of(const std::vector<uint32_t>& values);
 
 struct MeasureOptions {
-  ChildOrder order = ChildOrder::split_axis;
+  ChildOrder order = ChildOrder::split_axis;  // for a binary Tracer
   int threads = 0;   // 0: whatever oneTBB allows now; otherwise a tbb::global_control limit
   int repeats = 3;   // timed passes; the median is reported
 };
@@ -45,6 +49,8 @@ struct RayMeasurement {
 };
 
 // One untimed pass for the counters and hits, then `repeats` timed passes.
+RayMeasurement measure_rays(const AnyTracer& tracer, const std::vector<Ray>& rays, RayQuery query,
+                            const MeasureOptions& options = {});
 RayMeasurement measure_rays(const Tracer& tracer, const std::vector<Ray>& rays, RayQuery query,
                             const MeasureOptions& options = {});
 
@@ -56,7 +62,10 @@ struct BruteForceCheck {
 // On `sample` rays chosen by `seed` (all when sample >= rays.size()): the traversal's hit
 // must have the brute-force distance exactly, and be the brute-force triangle or another
 // at the very same distance (a tie on a shared edge or a duplicate); any-hit must agree
-// with brute force on occlusion.
+// with brute force on occlusion. Brute force uses the tracer's triangle test
+// (AnyTracer::brute_force).
+BruteForceCheck check_against_brute_force(const AnyTracer& tracer, const Mesh& mesh, const std::vector<Ray>& rays,
+                                          RayQuery query, uint64_t sample, uint64_t seed);
 BruteForceCheck check_against_brute_force(const Tracer& tracer, const Mesh& mesh, const std::vector<Ray>& rays,
                                           RayQuery query, uint64_t sample, uint64_t seed,
                                           ChildOrder order = ChildOrder::split_axis);

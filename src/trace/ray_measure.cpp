@@ -18,8 +18,8 @@
 
 namespace bvhopt {
 
-void trace_rays(const Tracer& tracer, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits,
-                std::vector<TraceCounters>* counters, ChildOrder order, size_t block) {
+void trace_rays(const AnyTracer& tracer, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits,
+                std::vector<TraceCounters>* counters, size_t block) {
   hits.resize(rays.size());
   if (counters) counters->assign(rays.size(), TraceCounters{});
   const Ray* in = rays.data();
@@ -28,17 +28,26 @@ void trace_rays(const Tracer& tracer, const std::vector<Ray>& rays, RayQuery que
   tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), std::max<size_t>(block, 1)),
                     [=, &tracer](const tbb::blocked_range<size_t>& r) {
                       TraceCounters scratch;
+                      if (!per_ray && query == RayQuery::closest) {
+                        tracer.closest(in + r.begin(), r.size(), out + r.begin(), scratch);
+                        return;
+                      }
                       for (size_t i = r.begin(); i < r.end(); ++i) {
                         TraceCounters& c = per_ray ? per_ray[i] : scratch;
                         if (query == RayQuery::closest) {
-                          out[i] = tracer.closest(in[i], c, order);
+                          out[i] = tracer.closest(in[i], c);
                         } else {
                           Hit h;
-                          if (tracer.any(in[i], c, order)) h.triangle_id = 0;
+                          if (tracer.any(in[i], c)) h.triangle_id = 0;
                           out[i] = h;
                         }
                       }
                     });
+}
+
+void trace_rays(const Tracer& tracer, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits,
+                std::vector<TraceCounters>* counters, ChildOrder order, size_t block) {
+  trace_rays(AnyTracer(tracer, order), rays, query, hits, counters, block);
 }
 
 CountDistribution distribution_of(const std::vector<uint32_t>& values) {
@@ -63,6 +72,11 @@ CountDistribution distribution_of(const std::vector<uint32_t>& values) {
 
 RayMeasurement measure_rays(const Tracer& tracer, const std::vector<Ray>& rays, RayQuery query,
                             const MeasureOptions& options) {
+  return measure_rays(AnyTracer(tracer, options.order), rays, query, options);
+}
+
+RayMeasurement measure_rays(const AnyTracer& tracer, const std::vector<Ray>& rays, RayQuery query,
+                            const MeasureOptions& options) {
   std::unique_ptr<tbb::global_control> limit;
   if (options.threads > 0)
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
@@ -73,7 +87,7 @@ RayMeasurement measure_rays(const Tracer& tracer, const std::vector<Ray>& rays, 
 
   std::vector<Hit> hits;
   std::vector<TraceCounters> counters;
-  trace_rays(tracer, rays, query, hits, &counters, options.order);
+  trace_rays(tracer, rays, query, hits, &counters);
   std::vector<uint32_t> steps(rays.size()), tests(rays.size());
   uint64_t hit_count = 0;
   for (size_t i = 0; i < rays.size(); ++i) {
@@ -88,7 +102,7 @@ RayMeasurement measure_rays(const Tracer& tracer, const std::vector<Ray>& rays, 
   std::vector<double> times;
   for (int r = 0; r < std::max(options.repeats, 1); ++r) {
     const auto start = std::chrono::steady_clock::now();
-    trace_rays(tracer, rays, query, hits, nullptr, options.order);
+    trace_rays(tracer, rays, query, hits, nullptr);
     times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   }
   std::sort(times.begin(), times.end());
@@ -99,6 +113,11 @@ RayMeasurement measure_rays(const Tracer& tracer, const std::vector<Ray>& rays, 
 
 BruteForceCheck check_against_brute_force(const Tracer& tracer, const Mesh& mesh, const std::vector<Ray>& rays,
                                           RayQuery query, uint64_t sample, uint64_t seed, ChildOrder order) {
+  return check_against_brute_force(AnyTracer(tracer, order), mesh, rays, query, sample, seed);
+}
+
+BruteForceCheck check_against_brute_force(const AnyTracer& tracer, const Mesh& mesh, const std::vector<Ray>& rays,
+                                          RayQuery query, uint64_t sample, uint64_t seed) {
   BruteForceCheck check;
   std::vector<size_t> picks;
   if (sample >= rays.size()) {
@@ -115,20 +134,19 @@ BruteForceCheck check_against_brute_force(const Tracer& tracer, const Mesh& mesh
     for (size_t k = r.begin(); k < r.end(); ++k) {
       const Ray& ray = rays[picks[k]];
       TraceCounters c;
-      const Hit expect = brute_force_closest(mesh, ray);
+      const Hit expect = tracer.brute_force(mesh, ray);
       if (query == RayQuery::any) {
-        bad[k] = tracer.any(ray, c, order) != expect.hit();
+        bad[k] = tracer.any(ray, c) != expect.hit();
         continue;
       }
-      const Hit got = tracer.closest(ray, c, order);
+      const Hit got = tracer.closest(ray, c);
       if (got.hit() != expect.hit()) {
         bad[k] = 1;
       } else if (got.hit() && (got.t != expect.t)) {
         bad[k] = 1;
       } else if (got.hit() && got.triangle_id != expect.triangle_id) {
         // Honest tie check: the traversal's triangle must itself be hit at the same t.
-        Hit alone;
-        bad[k] = !(intersect_triangle(ray, mesh.triangle(got.triangle_id), alone) && alone.t == expect.t);
+        bad[k] = !tracer.hits_at(mesh, ray, got.triangle_id, expect.t);
       }
     }
   });
@@ -138,8 +156,8 @@ BruteForceCheck check_against_brute_force(const Tracer& tracer, const Mesh& mesh
     if (check.mismatches++ == 0) {
       const Ray& ray = rays[picks[k]];
       TraceCounters c;
-      const Hit got = tracer.closest(ray, c, order);
-      const Hit expect = brute_force_closest(mesh, ray);
+      const Hit got = tracer.closest(ray, c);
+      const Hit expect = tracer.brute_force(mesh, ray);
       char buf[256];
       std::snprintf(buf, sizeof buf, "ray %zu: traversal triangle %d t=%.9g, brute force triangle %d t=%.9g",
                     picks[k], got.hit() ? int(got.triangle_id) : -1, double(got.t),

@@ -4,6 +4,7 @@
 
 #include "bvhopt/mesh.h"
 #include "bvhopt/ray.h"
+#include "bvhopt/triangle.h"
 
 namespace bvhopt {
 
@@ -15,5 +16,8 @@ bool brute_force_any(const Mesh& mesh, const Ray& ray);
 // v2 - v0 in float, no fused operations, division deferred; wide_kernel.h): the oracle of
 // the wide tracer's default triangle test.
 Hit brute_force_closest_mt(const Mesh& mesh, const Ray& ray);
+// Its test on one triangle: fills t, u, v of `hit` (not the id) for t in [tmin, tmax] and
+// t < hit.t.
+bool intersect_triangle_mt(const Ray& ray, const Triangle& tri, Hit& hit);
 
 }  // namespace bvhopt
