@@ -13,19 +13,89 @@
 
 namespace bvhopt::cli {
 
+namespace {
+
+struct BuildCommandOptions {
+  SceneOption scene;
+  EvhOption evh;
+  ThreadsOption threads;
+  CostOption cost;
+  BuildOptions build;  // --leaf-size and --bins write straight into it
+  std::string builder{builder_name(BuildOptions{}.kind)};
+  bool bins_given = false;
+  std::string output;
+  bool json = false;
+};
+
+void print_build_summary(const BuildCommandOptions& opt, const Mesh& mesh, const PrimitiveRefs& refs,
+                         const TreeStats& st, double load_s, double build_s, const std::string& evh_report) {
+  const uint32_t leaf_size = opt.build.leaf.max_leaf_size;
+  if (opt.json) {
+    print_json({{"scene", mesh.name},
+                {"triangles", mesh.triangle_count()},
+                {"references", refs.size()},
+                {"builder", opt.builder},
+                {"leaf_size", leaf_size},
+                {"threads", opt.threads.effective()},
+                {"load_seconds", load_s},
+                {"build_seconds", build_s},
+                {"cost", st.cost},
+                {"ocost", st.ocost},
+                {"nodes", st.nodes},
+                {"leaves", st.leaves},
+                {"max_depth", st.max_depth},
+                {"output", opt.output}});
+    return;
+  }
+  std::cout << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles, loaded in "
+            << format_double(load_s, 2) << " s)\n"
+            << (opt.evh.enabled ? "evh        " + evh_report + "\n" : std::string())
+            << "builder    " << opt.builder << ", leaf size " << leaf_size << ", " << opt.threads.effective()
+            << " threads\n"
+            << "build      " << format_double(build_s * 1e3, 1) << " ms\n"
+            << "cost       " << format_double(st.cost, 3) << "  (ocost " << format_double(st.ocost, 3) << ")\n"
+            << "nodes      " << st.nodes << " (" << st.leaves << " leaves), depth " << st.max_depth << "\n"
+            << "written    " << opt.output << "\n";
+}
+
+void run_build(const BuildCommandOptions& opt) {
+  auto threads = opt.threads.apply();
+  ProgressLine progress;
+  progress.update("loading " + opt.scene.spec, true);
+  Stopwatch load_clock;
+  Mesh mesh = opt.scene.load();
+  double load_s = load_clock.seconds();
+
+  BuildOptions options = opt.build;
+  options.kind = *parse_builder(opt.builder);
+  options.cost = opt.cost.model();
+  // An explicit bin count holds at every node; the adaptive count is the default's.
+  if (opt.bins_given) options.binned.refs_per_bin = 0;
+  progress.update("building " + std::to_string(mesh.triangle_count()) + " triangles with " + opt.builder, true);
+  Stopwatch build_clock;
+  std::string evh_report;
+  PrimitiveRefs refs = opt.evh.make_refs(mesh, &evh_report);
+  Bvh bvh = build_bvh(refs, options);
+  // Over subdivided references a leaf keeps one reference per triangle.
+  if (opt.evh.enabled) dedup_leaf_references(bvh, refs);
+  double build_s = build_clock.seconds();
+
+  BvhFileInfo info;
+  info.cost = options.cost;
+  info.scene_name = mesh.name;
+  info.scene_triangles = mesh.triangle_count();
+  info.method = opt.evh.enabled ? "evh+" + opt.builder : opt.builder;
+  progress.update("writing " + opt.output, true);
+  write_bvh_file(opt.output, bvh, refs, info);
+  progress.finish();
+
+  print_build_summary(opt, mesh, refs, compute_stats(bvh, options.cost), load_s, build_s, evh_report);
+}
+
+}  // namespace
+
 void register_build_command(CLI::App& app) {
-  struct Options {
-    SceneOption scene;
-    EvhOption evh;
-    ThreadsOption threads;
-    CostOption cost;
-    BuildOptions build;  // --leaf-size and --bins write straight into it
-    std::string builder{builder_name(BuildOptions{}.kind)};
-    CLI::Option* bins = nullptr;
-    std::string output;
-    bool json = false;
-  };
-  auto opt = std::make_shared<Options>();
+  auto opt = std::make_shared<BuildCommandOptions>();
   CLI::App* cmd = app.add_subcommand("build", "Build a BVH over a scene with a top-down builder and save it");
   opt->scene.add_to(cmd);
   std::vector<std::string> names;
@@ -38,75 +108,20 @@ void register_build_command(CLI::App& app) {
   cmd->add_option("--leaf-size", opt->build.leaf.max_leaf_size, "Largest number of references per leaf")
       ->check(CLI::Range(1u, 65535u))
       ->capture_default_str();
-  opt->bins = cmd->add_option("--bins", opt->build.binned.bin_count,
-                              "Bins per axis at every node for the binned builder. Without it, large nodes get more "
-                              "bins (up to " + std::to_string(kMaxBinCount) + ") and small ones fewer")
-                  ->check(CLI::Range(kMinBinCount, kMaxBinCount))
-                  ->capture_default_str();
+  CLI::Option* bins =
+      cmd->add_option("--bins", opt->build.binned.bin_count,
+                      "Bins per axis at every node for the binned builder. Without it, large nodes get more "
+                      "bins (up to " + std::to_string(kMaxBinCount) + ") and small ones fewer")
+          ->check(CLI::Range(kMinBinCount, kMaxBinCount))
+          ->capture_default_str();
   opt->evh.add_to(cmd);
   opt->cost.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_option("-o,--output", opt->output, "BVH file to write")->required();
   cmd->add_flag("--json", opt->json, "Print the summary as JSON");
-  cmd->callback([opt] {
-    auto threads = opt->threads.apply();
-    ProgressLine progress;
-    progress.update("loading " + opt->scene.spec, true);
-    Stopwatch load_clock;
-    Mesh mesh = opt->scene.load();
-    double load_s = load_clock.seconds();
-
-    BuildOptions options = opt->build;
-    options.kind = *parse_builder(opt->builder);
-    options.cost = opt->cost.model();
-    // An explicit bin count holds at every node; the adaptive count is the default's.
-    if (opt->bins->count() > 0) options.binned.refs_per_bin = 0;
-    const uint32_t leaf_size = options.leaf.max_leaf_size;
-    progress.update("building " + std::to_string(mesh.triangle_count()) + " triangles with " + opt->builder, true);
-    Stopwatch build_clock;
-    std::string evh_report;
-    PrimitiveRefs refs = opt->evh.make_refs(mesh, &evh_report);
-    Bvh bvh = build_bvh(refs, options);
-    // Over subdivided references a leaf keeps one reference per triangle.
-    if (opt->evh.enabled) dedup_leaf_references(bvh, refs);
-    double build_s = build_clock.seconds();
-
-    BvhFileInfo info;
-    info.cost = options.cost;
-    info.scene_name = mesh.name;
-    info.scene_triangles = mesh.triangle_count();
-    info.method = opt->evh.enabled ? "evh+" + opt->builder : opt->builder;
-    progress.update("writing " + opt->output, true);
-    write_bvh_file(opt->output, bvh, refs, info);
-    progress.finish();
-
-    TreeStats st = compute_stats(bvh, options.cost);
-    if (opt->json) {
-      print_json({{"scene", mesh.name},
-                  {"triangles", mesh.triangle_count()},
-                  {"references", refs.size()},
-                  {"builder", opt->builder},
-                  {"leaf_size", leaf_size},
-                  {"threads", opt->threads.effective()},
-                  {"load_seconds", load_s},
-                  {"build_seconds", build_s},
-                  {"cost", st.cost},
-                  {"ocost", st.ocost},
-                  {"nodes", st.nodes},
-                  {"leaves", st.leaves},
-                  {"max_depth", st.max_depth},
-                  {"output", opt->output}});
-      return;
-    }
-    std::cout << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles, loaded in "
-              << format_double(load_s, 2) << " s)\n"
-              << (opt->evh.enabled ? "evh        " + evh_report + "\n" : std::string())
-              << "builder    " << opt->builder << ", leaf size " << leaf_size << ", "
-              << opt->threads.effective() << " threads\n"
-              << "build      " << format_double(build_s * 1e3, 1) << " ms\n"
-              << "cost       " << format_double(st.cost, 3) << "  (ocost " << format_double(st.ocost, 3) << ")\n"
-              << "nodes      " << st.nodes << " (" << st.leaves << " leaves), depth " << st.max_depth << "\n"
-              << "written    " << opt->output << "\n";
+  cmd->callback([opt, bins] {
+    opt->bins_given = bins->count() > 0;
+    run_build(*opt);
   });
 }
 

@@ -63,18 +63,18 @@ struct DemoRun {
   const DemoOptions& opt;
   CostModel model;
   ProgressLine& progress;
-  Mesh mesh;
+  Mesh mesh{};
   double scene_seconds = 0.0;
-  PrimitiveRefs refs;
-  std::vector<Ray> primary_rays, random_rays;
+  PrimitiveRefs refs{};
+  std::vector<Ray> primary_rays{}, random_rays{};
   uint32_t image_w = 0, image_h = 0;
-  std::vector<TraceCounters> unoptimized_steps;
+  std::vector<TraceCounters> unoptimized_steps{};
   struct Best {
     double cost = 1e300;
     std::string method;
     std::vector<TraceCounters> steps;
-  } best;
-  std::vector<DemoRow> rows;
+  } best{};
+  std::vector<DemoRow> rows{};
 
   void measure(const std::string& method, double seconds, const Bvh& bvh);
 };

@@ -6,7 +6,7 @@
 #   scripts/determinism-snapshot.sh [BVHOPT_BINARY] > snapshot.txt
 set -euo pipefail
 bin=${1:-build/release/bvhopt}
-scenes_dir=${BVHOPT_SCENES:-$(dirname "$0")/../../shared/scenes}
+scenes_dir=${BVHOPT_SCENES:-$(git -C "$(dirname "$0")" worktree list --porcelain 2>/dev/null | sed -n "1s/^worktree //p")/../shared/scenes}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 fields() { python3 -c 'import json,sys; d=json.load(sys.stdin); print(" ".join(f"{k}={d[k]}" for k in sys.argv[1:] if k in d))' "$@"; }
