@@ -394,45 +394,40 @@ Header read_header(Reader& in, const std::string& name, uint64_t file_size, BvhF
   return h;
 }
 
+// Reads `count` records of `record_size` bytes a chunk at a time, handing each to
+// `take(index, bytes)`: the file is never held in memory twice.
+template <class TakeRecord>
+void read_in_chunks(Reader& in, std::vector<unsigned char>& chunk, uint64_t count, size_t record_size,
+                    const TakeRecord& take) {
+  const size_t per_chunk = chunk.size() / record_size;
+  for (uint64_t i = 0; i < count;) {
+    const size_t n = static_cast<size_t>(std::min<uint64_t>(count - i, per_chunk));
+    in.read(chunk.data(), n * record_size);
+    for (size_t k = 0; k < n; ++k) take(i + k, chunk.data() + k * record_size);
+    i += n;
+  }
+}
+
 // The node, slot and reference records, hashed as they are read, then the checksum: a
 // flipped byte is reported as corruption rather than as whatever it broke.
 void read_records(Reader& in, const std::string& name, const Header& h, Bvh& bvh, PrimitiveRefs& refs) {
   std::vector<unsigned char> chunk(kIoChunk);
   bvh.nodes.resize(h.node_count);
-  constexpr size_t kNodesPerChunk = kIoChunk / kNodeRecord;
-  for (uint64_t i = 0; i < h.node_count;) {
-    size_t n = static_cast<size_t>(std::min<uint64_t>(h.node_count - i, kNodesPerChunk));
-    in.read(chunk.data(), n * kNodeRecord);
-    const unsigned char* p = chunk.data();
-    for (size_t k = 0; k < n; ++k, p += kNodeRecord) {
-      BvhNode& nd = bvh.nodes[i + k];
-      nd.set_box(load_box(p));
-      nd.left_or_first = load<uint32_t>(p + 24);
-      nd.right_or_count = load<uint32_t>(p + 28);
-    }
-    i += n;
-  }
+  read_in_chunks(in, chunk, h.node_count, kNodeRecord, [&](uint64_t i, const unsigned char* p) {
+    BvhNode& nd = bvh.nodes[i];
+    nd.set_box(load_box(p));
+    nd.left_or_first = load<uint32_t>(p + 24);
+    nd.right_or_count = load<uint32_t>(p + 28);
+  });
   bvh.ref_indices.resize(h.slot_count);
-  constexpr size_t kSlotsPerChunk = kIoChunk / kSlotRecord;
-  for (uint64_t i = 0; i < h.slot_count;) {
-    size_t n = static_cast<size_t>(std::min<uint64_t>(h.slot_count - i, kSlotsPerChunk));
-    in.read(chunk.data(), n * kSlotRecord);
-    for (size_t k = 0; k < n; ++k) bvh.ref_indices[i + k] = load<uint32_t>(chunk.data() + k * kSlotRecord);
-    i += n;
-  }
+  read_in_chunks(in, chunk, h.slot_count, kSlotRecord,
+                 [&](uint64_t i, const unsigned char* p) { bvh.ref_indices[i] = load<uint32_t>(p); });
   refs.resize(h.ref_count);
-  constexpr size_t kRefsPerChunk = kIoChunk / kRefRecord;
-  for (uint64_t i = 0; i < h.ref_count;) {
-    size_t n = static_cast<size_t>(std::min<uint64_t>(h.ref_count - i, kRefsPerChunk));
-    in.read(chunk.data(), n * kRefRecord);
-    const unsigned char* p = chunk.data();
-    for (size_t k = 0; k < n; ++k, p += kRefRecord) {
-      refs.boxes[i + k] = load_box(p);
-      refs.centroids[i + k] = refs.boxes[i + k].center();
-      refs.triangle_ids[i + k] = load<uint32_t>(p + 24);
-    }
-    i += n;
-  }
+  read_in_chunks(in, chunk, h.ref_count, kRefRecord, [&](uint64_t i, const unsigned char* p) {
+    refs.boxes[i] = load_box(p);
+    refs.centroids[i] = refs.boxes[i].center();
+    refs.triangle_ids[i] = load<uint32_t>(p + 24);
+  });
   const uint64_t computed = in.checksum();
   unsigned char tail[8];
   in.read(tail, 8, false);
