@@ -21,6 +21,7 @@
 #include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
 #include "cli_common.h"
+#include "trace_common.h"
 #include "commands.h"
 
 namespace bvhopt::cli {
@@ -55,6 +56,7 @@ struct DemoOptions {
   uint64_t rays = 0;
   bool quick = false;
   bool json = false;
+  LayoutOption layout;
 };
 
 // The built-in scene, and every tree measured on it against the same ray sets (made once,
@@ -85,7 +87,10 @@ void DemoRun::measure(const std::string& method, double seconds, const Bvh& bvh)
   row.seconds = seconds;
   row.stats = compute_stats(bvh, model);
   progress.update("tracing: " + row.method, true);
-  Tracer tracer(finalize(bvh, refs), mesh);
+  const FlatBvh flat = finalize(bvh, refs);
+  Tracer tracer(flat, mesh);
+  const std::unique_ptr<WideTracer> wide = make_wide_tracer(flat, mesh, opt.layout.layout());
+  const AnyTracer traced = wide ? AnyTracer(*wide) : AnyTracer(tracer);
   if (primary_rays.empty()) {
     RaySetConfig config;
     config.kind = RayKind::primary;
@@ -101,12 +106,12 @@ void DemoRun::measure(const std::string& method, double seconds, const Bvh& bvh)
   }
   MeasureOptions mo;
   mo.repeats = 3;
-  row.primary_mrays = measure_rays(tracer, primary_rays, RayQuery::closest, mo).rays_per_second * 1e-6;
-  row.random_mrays = measure_rays(tracer, random_rays, RayQuery::closest, mo).rays_per_second * 1e-6;
+  row.primary_mrays = measure_rays(traced, primary_rays, RayQuery::closest, mo).rays_per_second * 1e-6;
+  row.random_mrays = measure_rays(traced, random_rays, RayQuery::closest, mo).rays_per_second * 1e-6;
   if (row.method == "sweep" || row.stats.cost < best.cost) {
     std::vector<Hit> hits;
     std::vector<TraceCounters> counters;
-    trace_rays(tracer, primary_rays, RayQuery::closest, hits, &counters);
+    trace_rays(traced, primary_rays, RayQuery::closest, hits, &counters);
     if (row.method == "sweep") unoptimized_steps = counters;
     if (row.stats.cost < best.cost) best = {row.stats.cost, row.method, std::move(counters)};
   }
@@ -191,6 +196,7 @@ void print_demo(const DemoRun& run, const std::filesystem::path& unopt_png, cons
                         {"threads", opt.threads.effective()},
                         {"c_t", model.traversal},
                         {"c_i", model.intersection},
+                        {"layout", opt.layout.name},
                         {"heatmaps", {unopt_png.string(), best_png.string()}}};
     for (const DemoRow& r : run.rows)
       j["rows"].push_back({{"method", r.method},
@@ -254,6 +260,7 @@ void register_demo_command(CLI::App& app) {
   cmd->add_option("--rays", opt->rays, "Rays per set (default: 1024x768 primary rays and 500,000 random rays)");
   cmd->add_flag("--quick", opt->quick, "Shorter annealing schedule (250 passes instead of 1250)");
   opt->cost.add_to(cmd);
+  opt->layout.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print JSON");
   cmd->callback([opt] { run_demo(*opt); });

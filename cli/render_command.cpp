@@ -26,6 +26,7 @@ struct RenderOptions {
   std::string order = "axis";
   bool json = false;
   CameraOptions camera;
+  LayoutOption layout;
 };
 
 // Renders the heat map (and the shaded image, and the difference to --compare when given)
@@ -33,7 +34,7 @@ struct RenderOptions {
 void run_render(const RenderOptions& opt) {
   auto threads = opt.threads.apply();
   ProgressLine progress;
-  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress);
+  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout());
   const Mesh& mesh = loaded.mesh;
   const LoadedTree& tree = loaded.tree;
   progress.finish();
@@ -43,7 +44,7 @@ void run_render(const RenderOptions& opt) {
 
   std::vector<Hit> hits;
   std::vector<TraceCounters> counters;
-  trace_rays(*tree.tracer, rays, RayQuery::closest, hits, &counters, order);
+  trace_rays(tree.traced(order), rays, RayQuery::closest, hits, &counters);
   write_png(opt.heatmap, heatmap_image(counters, cam.width, cam.height, opt.max_steps));
   if (!opt.shaded.empty()) write_png(opt.shaded, shaded_image(mesh, rays, hits, cam.width, cam.height));
 
@@ -52,10 +53,10 @@ void run_render(const RenderOptions& opt) {
   mean_a /= double(counters.size());
   std::string diff_path;
   if (!opt.compare.empty()) {
-    const LoadedTree other = load_tree_for_scene(opt.compare, mesh);
+    const LoadedTree other = load_tree_for_scene(opt.compare, mesh, opt.layout.layout());
     std::vector<Hit> hits_b;
     std::vector<TraceCounters> counters_b;
-    trace_rays(*other.tracer, rays, RayQuery::closest, hits_b, &counters_b, order);
+    trace_rays(other.traced(order), rays, RayQuery::closest, hits_b, &counters_b);
     for (const TraceCounters& c : counters_b) mean_b += c.steps;
     mean_b /= double(counters_b.size());
     diff_path = opt.compare_heatmap;
@@ -67,7 +68,8 @@ void run_render(const RenderOptions& opt) {
   }
   if (opt.json) {
     nlohmann::json j = {{"bvh", opt.bvh_file}, {"scene", mesh.name}, {"width", cam.width},
-                        {"height", cam.height}, {"heatmap", opt.heatmap}, {"mean_steps", mean_a}};
+                        {"height", cam.height}, {"heatmap", opt.heatmap}, {"mean_steps", mean_a},
+                        {"layout", opt.layout.name}};
     if (!opt.shaded.empty()) j["shaded"] = opt.shaded;
     if (!opt.compare.empty()) {
       j["compare"] = opt.compare;
@@ -109,6 +111,7 @@ void register_render_command(CLI::App& app) {
   cmd->add_option("--range", opt->range, "Step difference shown as full red/blue")->capture_default_str();
   cmd->add_option("--order", opt->order, "axis | distance")->check(CLI::IsMember({"axis", "distance"}))->capture_default_str();
   opt->camera.add_to(cmd);
+  opt->layout.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print a summary as JSON");
   cmd->callback([opt] { run_render(*opt); });

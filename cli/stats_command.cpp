@@ -2,7 +2,9 @@
 #include <iostream>
 
 #include "bvhopt/bvh_file.h"
+#include "bvhopt/finalize.h"
 #include "bvhopt/stats.h"
+#include "bvhopt/wide_bvh.h"
 #include "cli_common.h"
 #include "commands.h"
 
@@ -28,6 +30,16 @@ void run_stats(const StatsOptions& opt) {
   if (opt.ci_given) model.intersection = opt.cost.intersection;
   TreeStats st = compute_stats(file.bvh, model);
   const size_t triangles = count_distinct_triangles(file.bvh, file.refs);
+  // The wide SAH cost (wide_bvh.h) of the SAH-optimal collapses the wide layouts trace.
+  double wide_sah[2] = {0.0, 0.0};
+  if (!file.bvh.empty()) {
+    const FlatBvh flat = finalize(file.bvh, file.refs);
+    for (int i = 0; i < 2; ++i) {
+      CollapseOptions o;
+      o.width = i == 0 ? 4 : 8;
+      wide_sah[i] = collapse_to_wide(flat, o).sah_cost;
+    }
+  }
   if (opt.json) {
     print_json({{"file", opt.input},
                 {"scene", file.info.scene_name},
@@ -49,7 +61,9 @@ void run_stats(const StatsOptions& opt) {
                 {"inner_area_sum", st.inner_area_sum},
                 {"leaf_area_sum", st.leaf_area_sum},
                 {"inner_area_by_depth", st.inner_area_by_depth},
-                {"leaf_area_by_depth", st.leaf_area_by_depth}});
+                {"leaf_area_by_depth", st.leaf_area_by_depth},
+                {"wide_sah_bvh4", wide_sah[0]},
+                {"wide_sah_bvh8", wide_sah[1]}});
     return;
   }
   std::cout << "file        " << opt.input << "\n"
@@ -66,7 +80,9 @@ void run_stats(const StatsOptions& opt) {
             << "depth       max " << st.max_depth << ", mean leaf depth " << format_double(st.mean_leaf_depth, 2)
             << "\n"
             << "area sums   inner " << format_double(st.inner_area_sum / st.root_area, 2) << ", leaves "
-            << format_double(st.leaf_area_sum / st.root_area, 2) << " (relative to the root)\n";
+            << format_double(st.leaf_area_sum / st.root_area, 2) << " (relative to the root)\n"
+            << "wide SAH    bvh4 " << format_double(wide_sah[0], 3) << ", bvh8 " << format_double(wide_sah[1], 3)
+            << "   (SAH-optimal collapse, c_node 1, c_blk 1)\n";
   if (opt.per_depth) {
     std::cout << "depth  inner_area/root  leaf_area/root\n";
     for (size_t d = 0; d < st.inner_area_by_depth.size(); ++d)

@@ -48,6 +48,7 @@ struct TraceOptions {
   int repeats = 3;
   uint32_t width = 1024, height = 768;
   CameraOptions camera;
+  LayoutOption layout;
 };
 
 // What one run measured, for the report.
@@ -90,6 +91,9 @@ void print_trace_json(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
                       {"count", r.set.rays.size()},
                       {"seed", r.set.seed},
                       {"order", opt.order},
+                      {"layout", opt.layout.name},
+                      {"isa", std::string(tree.traced(parse_child_order(opt.order)).isa())},
+                      {"layout_seconds", tree.layout_seconds},
                       {"hit_rate", m1.hit_rate},
                       {"threads_1", {{"seconds", m1.seconds}, {"rays_per_second", m1.rays_per_second}}},
                       {"threads_n", {{"threads", mn.threads}, {"seconds", mn.seconds},
@@ -105,6 +109,8 @@ void print_trace_text(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
   const RayMeasurement& m1 = r.one_thread;
   const RayMeasurement& mn = r.all_threads;
   std::cout << "tree       " << opt.bvh_file << " (" << tree.info.method << ")\n"
+            << "layout     " << opt.layout.name << ", " << tree.traced(parse_child_order(opt.order)).isa() << " kernel"
+            << (tree.wide ? ", built in " + format_double(1e3 * tree.layout_seconds, 1) + " ms" : std::string()) << "\n"
             << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles)\n"
             << "rays       " << r.set.rays.size() << " " << ray_kind_name(r.set.kind)
             << (r.set.query == RayQuery::any ? " (any hit)" : " (closest hit)") << ", seed " << r.set.seed << "\n"
@@ -130,10 +136,11 @@ void print_trace_text(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
 void run_trace(const TraceOptions& opt) {
   auto threads = opt.threads.apply();
   ProgressLine progress;
-  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress);
+  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout());
   const Mesh& mesh = loaded.mesh;
   const LoadedTree& tree = loaded.tree;
   const ChildOrder order = parse_child_order(opt.order);
+  const AnyTracer traced = tree.traced(order);
 
   progress.update("making " + opt.rays + " rays", true);
   TraceResults r;
@@ -145,15 +152,15 @@ void run_trace(const TraceOptions& opt) {
   one.order = order;
   one.threads = 1;
   one.repeats = opt.repeats;
-  r.one_thread = measure_rays(*tree.tracer, set.rays, set.query, one);
+  r.one_thread = measure_rays(traced, set.rays, set.query, one);
   MeasureOptions all = one;
   all.threads = opt.threads.effective();
   progress.update("tracing " + std::to_string(set.rays.size()) + " rays on " + std::to_string(all.threads) + " threads",
                   true);
-  r.all_threads = measure_rays(*tree.tracer, set.rays, set.query, all);
+  r.all_threads = measure_rays(traced, set.rays, set.query, all);
   if (opt.check > 0) {
     progress.update("checking " + std::to_string(opt.check) + " rays against brute force", true);
-    r.check = check_against_brute_force(*tree.tracer, mesh, set.rays, set.query, opt.check, opt.seed, order);
+    r.check = check_against_brute_force(traced, mesh, set.rays, set.query, opt.check, opt.seed);
   }
   progress.finish();
 
@@ -189,6 +196,7 @@ void register_trace_command(CLI::App& app) {
   cmd->add_option("--load-rays", opt->load_rays, "Trace the rays of this ray file instead of generating them")
       ->type_name("FILE");
   opt->camera.add_to(cmd);
+  opt->layout.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print the results as JSON");
   cmd->callback([opt] { run_trace(*opt); });

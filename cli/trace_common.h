@@ -4,6 +4,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <chrono>
 #include <memory>
 #include <optional>
 #include <sstream>
@@ -14,20 +15,50 @@
 #include "bvhopt/finalize.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/ray_sets.h"
+#include "bvhopt/any_tracer.h"
 #include "bvhopt/tracer.h"
+#include "bvhopt/wide_tracer.h"
 #include "cli_common.h"
 
 namespace bvhopt::cli {
 
+// --layout: the layout the tree is traced in. The file stores the binary tree; a wide
+// layout is collapsed and laid out from it on load.
+struct LayoutOption {
+  std::string name = std::string(trace_layout_name(kDefaultTraceLayout));
+
+  void add_to(CLI::App* cmd) {
+    cmd->add_option("--layout", name, "Trace layout: bvh2 (binary nodes) | bvh4 | bvh8 (wide SIMD nodes, rebuilt on load)")
+        ->check(CLI::IsMember({"bvh2", "bvh4", "bvh8"}))
+        ->capture_default_str();
+  }
+  TraceLayout layout() const { return *parse_trace_layout(name); }
+};
+
+// The wide tracer of a bvh4 / bvh8 layout (null for bvh2).
+inline std::unique_ptr<WideTracer> make_wide_tracer(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout) {
+  if (layout == TraceLayout::bvh2) return nullptr;
+  WideTracerOptions o;
+  o.layout.collapse.width = uint32_t(layout);
+  return std::make_unique<WideTracer>(flat, mesh, o);
+}
+
 struct LoadedTree {
   BvhFileInfo info;
   double sah = 0.0;
+  // The binary tracer: always there, since ray sets and the default camera are made with it.
   std::unique_ptr<Tracer> tracer;
+  std::unique_ptr<WideTracer> wide;  // for --layout bvh4 / bvh8
+  double layout_seconds = 0.0;       // making the wide layout (collapse + layout)
+
+  // What traces the rays in the chosen layout.
+  AnyTracer traced(ChildOrder order) const { return wide ? AnyTracer(*wide) : AnyTracer(*tracer, order); }
 };
 
 // Reads the BVH file and refuses a scene whose triangle count differs from the one the
 // tree was built over (the ids would point at the wrong triangles, or past the end).
-inline LoadedTree load_tree_for_scene(const std::string& file, const Mesh& mesh) {
+inline LoadedTree load_tree_for_scene(const std::string& file, const Mesh& mesh,
+                                      TraceLayout layout = TraceLayout::bvh2) {
   BvhFile f = read_bvh_file(file);
   if (f.info.scene_triangles != mesh.triangle_count())
     throw Error(file + ": built over scene '" + f.info.scene_name + "' with " +
@@ -35,7 +66,13 @@ inline LoadedTree load_tree_for_scene(const std::string& file, const Mesh& mesh)
                 std::to_string(mesh.triangle_count()) + " (pass the scene the tree was built from)");
   LoadedTree t;
   t.info = f.info;
-  t.tracer = std::make_unique<Tracer>(finalize(f.bvh, f.refs), mesh);
+  const FlatBvh flat = finalize(f.bvh, f.refs);
+  t.tracer = std::make_unique<Tracer>(flat, mesh);
+  if (layout != TraceLayout::bvh2) {
+    const auto start = std::chrono::steady_clock::now();
+    t.wide = make_wide_tracer(flat, mesh, layout);
+    t.layout_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
   return t;
 }
 
@@ -45,11 +82,11 @@ struct SceneAndTree {
   LoadedTree tree;
 };
 inline SceneAndTree load_scene_and_tree(const SceneOption& scene, const std::string& bvh_file,
-                                        ProgressLine& progress) {
+                                        ProgressLine& progress, TraceLayout layout = TraceLayout::bvh2) {
   progress.update("loading " + scene.spec + " and " + bvh_file, true);
   SceneAndTree out;
   out.mesh = scene.load();
-  out.tree = load_tree_for_scene(bvh_file, out.mesh);
+  out.tree = load_tree_for_scene(bvh_file, out.mesh, layout);
   return out;
 }
 

@@ -1,0 +1,100 @@
+// bvhopt trace / render / demo with --layout: every layout traces the same rays, passes the
+// brute-force check, and the JSON says which layout and which ISA ran; BVHOPT_ISA forces one.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "bvhopt/wide_tracer.h"
+#include "test_support.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+using CliRun = bvhopt::testing::ProgramTest::Result;
+using WideCli = bvhopt::testing::ProgramTest;
+
+TEST_F(WideCli, TraceEveryLayoutAgreesWithBruteForceAndReportsTheIsa) {
+  const fs::path bvh = dir_ / "s.bvh";
+  ASSERT_EQ(run("build 'builtin?triangles=4000' --leaf-size 4 -o " + bvh.string()).exit_code, 0);
+  double hit_rate = -1.0;
+  for (const char* layout : {"bvh2", "bvh4", "bvh8"}) {
+    CliRun r = run("trace " + bvh.string() + " --scene 'builtin?triangles=4000' --rays random --count 3000 --check 3000 "
+                   "--repeats 1 --json --layout " + layout);
+    ASSERT_EQ(r.exit_code, 0) << layout << ": " << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["layout"], layout);
+    EXPECT_EQ(j["brute_force"]["mismatches"], 0) << layout;
+    EXPECT_EQ(j["brute_force"]["checked"], 3000);
+    if (std::string(layout) == "bvh2") {
+      EXPECT_EQ(j["isa"], "sse");
+      EXPECT_EQ(j["layout_seconds"].get<double>(), 0.0);
+    } else {
+      EXPECT_EQ(j["isa"], std::string(bvhopt::isa_name(bvhopt::default_isa())));
+      EXPECT_GT(j["layout_seconds"].get<double>(), 0.0);
+    }
+    // The same rays and, whatever the triangle test, the same hits or misses.
+    if (hit_rate < 0) hit_rate = j["hit_rate"].get<double>();
+    EXPECT_NEAR(j["hit_rate"].get<double>(), hit_rate, 0.002) << layout;
+  }
+}
+
+TEST_F(WideCli, StatsReportsTheWideSahCosts) {
+  const fs::path bvh = dir_ / "s.bvh";
+  ASSERT_EQ(run("build 'builtin?triangles=3000' -o " + bvh.string()).exit_code, 0);
+  CliRun r = run("stats --json " + bvh.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  const double w4 = j["wide_sah_bvh4"].get<double>(), w8 = j["wide_sah_bvh8"].get<double>();
+  EXPECT_GT(w8, 1.0);
+  // Every 4-wide collapse is also an 8-wide one, so the optimal 8-wide costs no more.
+  EXPECT_LE(w8, w4 * (1.0 + 1e-6));
+}
+
+TEST_F(WideCli, ForcedIsaRunsAndAMissingOrUnknownOneIsAnError) {
+  const fs::path bvh = dir_ / "s.bvh";
+  ASSERT_EQ(run("build 'builtin?triangles=2000' -o " + bvh.string()).exit_code, 0);
+  const std::string trace = "trace " + bvh.string() + " --scene 'builtin?triangles=2000' --rays random --count 500 "
+                            "--check 500 --repeats 1 --json --layout bvh8";
+  for (bvhopt::Isa isa : {bvhopt::Isa::sse42, bvhopt::Isa::avx2, bvhopt::Isa::avx512}) {
+    const std::string name(bvhopt::isa_name(isa));
+    ::setenv("BVHOPT_ISA", name.c_str(), 1);
+    CliRun r = run(trace);
+    ::unsetenv("BVHOPT_ISA");
+    if (bvhopt::isa_supported(isa)) {
+      ASSERT_EQ(r.exit_code, 0) << name << ": " << r.err;
+      EXPECT_EQ(nlohmann::json::parse(r.out)["isa"], name);
+    } else {
+      EXPECT_NE(r.exit_code, 0) << name;
+      EXPECT_NE(r.err.find("does not support"), std::string::npos) << r.err;
+    }
+  }
+  ::setenv("BVHOPT_ISA", "neon", 1);
+  CliRun r = run(trace);
+  ::unsetenv("BVHOPT_ISA");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("BVHOPT_ISA=neon"), std::string::npos) << r.err;
+}
+
+TEST_F(WideCli, RenderAndDemoTakeTheLayout) {
+  const fs::path bvh = dir_ / "s.bvh";
+  ASSERT_EQ(run("build 'builtin?triangles=2000' -o " + bvh.string()).exit_code, 0);
+  for (const char* layout : {"bvh2", "bvh8"}) {
+    CliRun r = run("render " + bvh.string() + " --scene 'builtin?triangles=2000' --width 64 --height 48 --json --layout " +
+                   layout + " --heatmap " + (dir_ / (std::string(layout) + ".png")).string());
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["layout"], layout);
+    EXPECT_GT(j["mean_steps"].get<double>(), 0.0);
+  }
+  CliRun d = run("demo --triangles 2000 --rays 2000 --quick --json --layout bvh4 --images " + (dir_ / "demo").string());
+  ASSERT_EQ(d.exit_code, 0) << d.err;
+  EXPECT_EQ(nlohmann::json::parse(d.out)["layout"], "bvh4");
+  CliRun bad = run("trace " + bvh.string() + " --scene 'builtin?triangles=2000' --layout bvh16");
+  EXPECT_NE(bad.exit_code, 0);
+}
+
+}  // namespace
