@@ -16,12 +16,12 @@ namespace bvhopt {
 
 // The wide SAH cost: C = [c_node * sum_nodes A(n) + c_blk * sum_leaves A(l) * ceil(p(l)/4)]
 // / A(root), p(l) the distinct triangles of leaf l (a leaf block tests 4 triangles at once).
-// Calibrated on this CPU (Xeon, AVX2 kernel, 1 thread) from the wide tracer's own counters:
-// over the primary, random and AO rays of Sponza, Conference and bunny (bvh8 of the sweep
-// tree), time per ray was fitted by least squares to nodes visited and blocks tested; a
-// node visit (8 slab tests + ordering + stack) cost about as much as a 4-triangle block
-// test, so both default to 1 (ratios between them are what matters; c_node / c_blk is
-// what the collapse trades). See bench/trace_bench --fit-costs.
+// Calibrated on the benchmark machine (Xeon, AVX-512 kernel, 1 thread) by tracing Sponza's
+// and bunny's best trees collapsed with c_node : c_blk = 2:1, 1:1, 1:2, 1:0.7 and 1:0.5 and
+// timing primary, random and AO rays against Embree in the same run: no ratio was faster
+// than 1:1 beyond the run-to-run noise (about 5%), consistent with the counters
+// (bench/trace_bench --fit-costs prints nodes and blocks per ray beside ns/ray), where a node
+// visit and a block test cost about the same. Only the ratio matters to the collapse.
 struct WideCostModel {
   double node = 1.0;   // c_node, per wide inner node visited
   double block = 1.0;  // c_blk, per 4-triangle leaf block tested
