@@ -16,7 +16,7 @@ namespace bvhopt {
 
 // The layouts a tree can be traced in. bvh8 is the default: the fastest on this project's
 // benchmark machine (bench/trace_bench, Sponza, Conference and bunny, 1 thread, every ray set:
-// bvh8 1.2-2.9x bvh2 and 1.1-1.4x bvh4, see docs/wide-bvh.md).
+// bvh8 2.4-3.3x bvh2 and 1.07-1.42x bvh4, see docs/wide-bvh.md).
 enum class TraceLayout : uint8_t { bvh2 = 0, bvh4 = 4, bvh8 = 8 };
 inline constexpr TraceLayout kDefaultTraceLayout = TraceLayout::bvh8;
 std::string_view trace_layout_name(TraceLayout layout);  // "bvh2", "bvh4", "bvh8"
