@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -402,6 +403,47 @@ TEST_F(Rejections, BadFieldsWithARecomputedChecksum) {
   reseal(b);
   EXPECT_NE(damaged(b).find("triangle id 40 out of range (the scene has 40 triangles)"), std::string::npos);
   (void)kSceneTrianglesAt;
+}
+
+// Content a valid checksum can cover but no writer produces: cost constants that are not
+// finite non-negative numbers, an inverted reference box, a node no path from the root reaches.
+TEST_F(Rejections, CorruptContentBehindAValidChecksum) {
+  const size_t hs = header_size();
+  constexpr size_t kTraversalAt = 48, kIntersectionAt = 56;
+  for (double bad : {std::nan(""), double(INFINITY), -2.0}) {
+    for (size_t at : {kTraversalAt, kIntersectionAt}) {
+      auto b = bytes_;
+      patch<double>(b, at, bad);
+      reseal(b);
+      std::string e = damaged(b);
+      EXPECT_NE(e.find("cost constant"), std::string::npos) << e;
+    }
+  }
+
+  // Reference 0's box with min and max x swapped (the reference has an extent in x).
+  const uint64_t nodes = peek<uint64_t>(bytes_, kNodeCountAt);
+  const size_t refs_at = hs + 32 * nodes + 4 * peek<uint64_t>(bytes_, kSlotCountAt);
+  auto b = bytes_;
+  size_t ref_at = refs_at;
+  while (peek<float>(b, ref_at) == peek<float>(b, ref_at + 12)) ref_at += 28;
+  const float lo = peek<float>(b, ref_at), hi = peek<float>(b, ref_at + 12);
+  patch<float>(b, ref_at, hi);
+  patch<float>(b, ref_at + 12, lo);
+  reseal(b);
+  std::string e = damaged(b);
+  EXPECT_NE(e.find("inverted"), std::string::npos) << e;
+
+  // One more node record after the last, a leaf over slot 0: nothing points to it.
+  b = bytes_;
+  std::vector<unsigned char> extra(32, 0);
+  std::memcpy(extra.data(), b.data() + hs, 24);  // the root's box
+  uint32_t leaf[2] = {0, 1u | 0x80000000u};
+  std::memcpy(extra.data() + 24, leaf, 8);
+  b.insert(b.begin() + std::ptrdiff_t(hs + 32 * nodes), extra.begin(), extra.end());
+  patch<uint64_t>(b, kNodeCountAt, nodes + 1);
+  reseal(b);
+  e = damaged(b);
+  EXPECT_NE(e.find("node " + std::to_string(nodes) + ": unreachable"), std::string::npos) << e;
 }
 
 // A forger who recomputes the checksum: random words anywhere in the file replaced by

@@ -24,7 +24,7 @@ struct BvhFileInfo {
 
 struct BvhFile {
   BvhFileInfo info;
-  Bvh bvh;              // compacted depth-first on reading
+  Bvh bvh;              // as stored: depth-first, every node reachable (the reader refuses others)
   PrimitiveRefs refs;   // boxes and triangle ids of the references (centroids recomputed)
 };
 

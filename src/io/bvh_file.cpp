@@ -3,6 +3,8 @@
 #include <unistd.h>
 
 #include <bit>
+#include <cmath>
+#include <utility>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -435,8 +437,8 @@ void read_records(Reader& in, const std::string& name, const Header& h, Bvh& bvh
 }
 
 // Children must follow their parent (depth-first order, hence no cycles) and stay in
-// range; each node gets at most one parent, whose link is set here. Leaves hold slots in
-// range.
+// range; each node gets at most one parent, whose link is set here, and every node but the
+// root gets one. Leaves hold slots in range.
 void link_parents(const std::string& name, const Header& h, Bvh& bvh) {
   for (uint64_t i = 0; i < h.node_count; ++i) {
     BvhNode& nd = bvh.nodes[i];
@@ -465,9 +467,14 @@ void link_parents(const std::string& name, const Header& h, Bvh& bvh) {
       child.parent = static_cast<uint32_t>(i);
     }
   }
+  // Writers store only what the root reaches; a node without a parent is extra content (and
+  // could hold slots a reachable leaf also claims).
+  for (uint64_t i = 1; i < h.node_count; ++i)
+    if (bvh.nodes[i].parent == kInvalidNode)
+      throw Error(name + ": node " + std::to_string(i) + ": unreachable from the root (no node has it as a child)");
 }
 
-// After the checksum: flags, root, links, and every index the records hold.
+// After the checksum: flags, cost constants, root, links, and every index the records hold.
 void check_references(const std::string& name, const Header& h, BvhFile& out) {
   Bvh& bvh = out.bvh;
   const PrimitiveRefs& refs = out.refs;
@@ -480,6 +487,12 @@ void check_references(const std::string& name, const Header& h, BvhFile& out) {
     throw Error(name + ": corrupt: root " + std::to_string(h.root) +
                 " (nodes are stored depth-first: the root is node 0" +
                 std::string(h.node_count == 0 ? ", and an empty tree has none)" : ")"));
+  // A negative or non-finite constant turns every cost comparison into nonsense (c_I = -2 makes
+  // one leaf look cheapest); the checksum cannot tell, so the value is checked.
+  for (const auto& [value, what] : {std::pair{out.info.cost.traversal, "c_T"}, std::pair{out.info.cost.intersection, "c_I"}})
+    if (!std::isfinite(value) || value < 0)
+      throw Error(name + ": corrupt header: cost constant " + what + " = " + std::to_string(value) +
+                  " (must be a finite number >= 0)");
   bvh.root = h.root;
   link_parents(name, h, bvh);
   for (uint64_t s = 0; s < h.slot_count; ++s)

@@ -84,6 +84,13 @@ void check_reference_arrays(Validation& v) {
     v.out.add("references: array sizes differ (" + num(v.ref_count) + " boxes, " + num(v.refs.centroids.size()) +
               " centroids, " + num(v.refs.triangle_ids.size()) + " triangle ids)");
   }
+  // Box::contains accepts an empty box anywhere, so an inverted or NaN reference box would pass
+  // every containment test; it stands for no triangle and is refused here.
+  for (size_t r = 0; r < v.ref_count; ++r) {
+    const Box& b = v.refs.boxes[r];
+    if (!(b.min.x <= b.max.x && b.min.y <= b.max.y && b.min.z <= b.max.z))
+      v.out.add("reference " + num(r) + ": box " + fmt_box(b) + " is inverted or not a number");
+  }
 }
 
 // A node on the walk's stack. The walk visits a compacted tree in index order and reads each
