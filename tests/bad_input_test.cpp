@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <fstream>
@@ -56,6 +57,41 @@ class BadInput : public ::testing::Test {
 };
 
 const std::string kTriangleVertices = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+
+// Loading must give the file's triangles, whatever the scale: no vertex welded onto a
+// neighbour closer than some fixed epsilon (which shrinks a 1e-6 mesh and flattens a 1e-12 one).
+TEST_F(BadInput, TinyScaleTrianglesAreTheFilesOwn) {
+  for (double scale : {1.0, 1e-6, 1e-12}) {
+    SCOPED_TRACE(scale);
+    std::string obj;
+    std::vector<Vec3> want;
+    char line[128];
+    for (int k = 0; k < 300; ++k) {
+      const Vec3 c[3] = {Vec3(float(k * scale), 0, 0), Vec3(float((k + 0.5) * scale), float(scale), 0),
+                         Vec3(float(k * scale), 0, float(scale))};
+      for (const Vec3& v : c) {
+        std::snprintf(line, sizeof line, "v %.9g %.9g %.9g\n", double(v.x), double(v.y), double(v.z));
+        obj += line;
+        want.push_back(v);
+      }
+      obj += "f " + std::to_string(3 * k + 1) + " " + std::to_string(3 * k + 2) + " " + std::to_string(3 * k + 3) + "\n";
+    }
+    Mesh m = load_mesh_file(write("tiny.obj", obj));
+    ASSERT_EQ(m.triangle_count(), 300u);
+    // The text is parsed, so allow a few float steps of each coordinate; a welded vertex
+    // moves by about `scale`, hundreds of steps.
+    auto off = [&](float got, float expect) {
+      return std::fabs(got - expect) > 1e-6f * std::max(std::fabs(expect), float(scale));
+    };
+    size_t moved = 0;
+    for (size_t t = 0; t < 300; ++t)
+      for (int i = 0; i < 3; ++i) {
+        const Vec3 got = m.vertex(m.indices[3 * t + size_t(i)]), expect = want[3 * t + size_t(i)];
+        moved += off(got.x, expect.x) || off(got.y, expect.y) || off(got.z, expect.z);
+      }
+    EXPECT_EQ(moved, 0u) << "vertices moved at scale " << scale;
+  }
+}
 
 TEST_F(BadInput, MissingFile) { expect_rejected(dir_ / "nowhere.obj", {"no such file"}); }
 

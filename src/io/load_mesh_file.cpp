@@ -8,6 +8,9 @@
 #include <filesystem>
 #include <limits>
 #include <string>
+#include <vector>
+#include <cstring>
+#include <unordered_map>
 #include <system_error>
 
 #include "bvhopt/error.h"
@@ -28,8 +31,41 @@ std::string clean_assimp_error(const char* text) {
 
 // What assimp does after reading. No aiProcess_FindDegenerates: zero-area triangles are part
 // of the input (conference.obj has 52,670) and must be kept and counted, not removed.
-constexpr unsigned kPostProcessing =
-    aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_RemoveComponent | aiProcess_JoinIdenticalVertices;
+// No aiProcess_JoinIdenticalVertices: it welds vertices closer than a fixed absolute epsilon,
+// which shrinks a mesh at 1e-6 scale and flattens one at 1e-12; weld_identical_positions
+// merges only bit-identical positions instead.
+constexpr unsigned kPostProcessing = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_RemoveComponent;
+
+// Shares one vertex among corners whose positions are bit for bit the same (assimp's OBJ
+// reader gives every face corner its own vertex), keeping the first occurrence's order. The
+// triangles are exactly the file's: no position moves.
+void weld_identical_positions(Mesh& mesh) {
+  struct Key {
+    uint32_t bits[3];
+    bool operator==(const Key&) const = default;
+  };
+  struct KeyHash {
+    size_t operator()(const Key& k) const {
+      uint64_t h = (uint64_t(k.bits[0]) << 32 | k.bits[1]) * 0x9e3779b97f4a7c15ull;
+      return size_t((h ^ (h >> 29) ^ k.bits[2]) * 0xbf58476d1ce4e5b9ull);
+    }
+  };
+  const size_t n = mesh.positions.size() / 3;
+  std::unordered_map<Key, uint32_t, KeyHash> first;
+  first.reserve(n);
+  std::vector<uint32_t> remap(n);
+  std::vector<float> welded;
+  welded.reserve(mesh.positions.size());
+  for (size_t v = 0; v < n; ++v) {
+    Key k;
+    std::memcpy(k.bits, &mesh.positions[3 * v], sizeof k.bits);
+    auto [it, inserted] = first.try_emplace(k, uint32_t(welded.size() / 3));
+    if (inserted) welded.insert(welded.end(), &mesh.positions[3 * v], &mesh.positions[3 * v] + 3);
+    remap[v] = it->second;
+  }
+  for (uint32_t& i : mesh.indices) i = remap[i];
+  mesh.positions = std::move(welded);
+}
 
 void check_file(const std::filesystem::path& path, const std::string& where) {
   std::error_code ec;
@@ -69,9 +105,8 @@ void check_scene(const aiScene* scene, const std::string& where) {
     for (unsigned f = 0; f < scene->mMeshes[m]->mNumFaces && !any_face; ++f)
       any_face = scene->mMeshes[m]->mFaces[f].mNumIndices >= 3;
   if (!any_face) throw Error(where + ": no triangles (the file holds no polygon faces)");
-  // Bad numbers must be caught before post-processing: JoinIdenticalVertices compares with
-  // NaN, finds no difference and would quietly weld a NaN vertex onto a good one, and
-  // every step trusts the face indices.
+  // Bad numbers must be caught before post-processing, which trusts the face indices, and
+  // before welding, which would treat NaN bit patterns as ordinary positions.
   for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
     const aiMesh* mesh = scene->mMeshes[m];
     const std::string mesh_name =
@@ -149,6 +184,7 @@ Mesh load_mesh_file(const std::filesystem::path& path) {
   scene = importer.ApplyPostProcessing(kPostProcessing);
   if (!scene) throw Error(where + ": cannot process: " + clean_assimp_error(importer.GetErrorString()));
   Mesh out = merge_meshes(scene, path, where);
+  weld_identical_positions(out);
   check_mesh(out);
   return out;
 }
