@@ -271,3 +271,30 @@ TEST(RaySets, BadFilesAreRejectedWithClearMessages) {
 
 }  // namespace
 }  // namespace bvhopt
+
+namespace bvhopt {
+namespace {
+
+// A scene whose bounds are one point has no segment between two distinct points of its box:
+// random rays must say so, not draw pairs forever.
+TEST(RaySets, RandomRaysOnAPointSizedSceneAreAnErrorNotAHang) {
+  Mesh mesh;
+  mesh.name = "point.obj";
+  for (int i = 0; i < 3; ++i) mesh.add_vertex({5, 5, 5});
+  mesh.add_triangle(0, 1, 2);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = flatten_for_tracing(build_bvh(refs), refs);
+  const Tracer tracer(flat, mesh);
+  RaySetConfig cfg;
+  cfg.kind = RayKind::random;
+  cfg.count = 1;
+  try {
+    make_ray_set(mesh, tracer, cfg);
+    FAIL() << "expected an Error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("single point"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace bvhopt

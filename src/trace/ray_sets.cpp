@@ -213,14 +213,23 @@ std::vector<Ray> camera_rays(const Camera& cam) {
 namespace {
 
 // Segments between two uniform points of the box.
+// A box whose extent rounds away can give the same point twice; a pair is redrawn at most
+// this many times, which only a box of (nearly) one point ever exhausts.
+constexpr int kMaxRandomRayDraws = 64;
+
 std::vector<Ray> random_rays(const Box& box, uint64_t count, uint64_t seed) {
+  const std::string no_segment =
+      "random rays: the scene's bounds are a single point, so no segment between two distinct points of its "
+      "box exists (use a camera ray set)";
+  if (box.extent() == Vec3(0.0f)) throw Error(no_segment);
   std::vector<Ray> rays;
   rays.resize(count);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 4096), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i < r.end(); ++i) {
       Rng rng(seed, i);
       Ray& ray = rays[i];
-      for (;;) {
+      for (int draw = 0;; ++draw) {
+        if (draw == kMaxRandomRayDraws) throw Error(no_segment);
         const Vec3 a = box.min + box.extent() * Vec3(rng.uniform(), rng.uniform(), rng.uniform());
         const Vec3 b = box.min + box.extent() * Vec3(rng.uniform(), rng.uniform(), rng.uniform());
         if (a == b) continue;  // a zero direction cannot be traced
