@@ -9,6 +9,7 @@
 #include "bvhopt/build.h"
 #include "bvhopt/error.h"
 #include "bvhopt/finalize.h"
+#include "bvhopt/testing/flatten_for_tracing.h"
 #include "bvhopt/scene.h"
 #include "test_support.h"
 
@@ -241,6 +242,26 @@ TEST(Finalize, CorruptTreeThrowsInsteadOfLooping) {
     if (!bvh[n].is_leaf()) deepest = n;
   bvh[deepest].set_child(1, bvh.root);
   EXPECT_THROW(finalize(bvh, refs), Error);
+}
+
+}  // namespace
+}  // namespace bvhopt
+
+namespace bvhopt {
+namespace {
+
+// A leaf's count is 16 bits in the flat node: the test-only flattening must refuse a larger
+// leaf as finalize does, not cast it and drop triangles.
+TEST(FlattenForTracing, LeafAboveSixteenBitsIsAnError) {
+  const uint32_t n = 70000;
+  const PrimitiveRefs refs = make_references(testing::random_mesh(n, 3, true));
+  Bvh bvh;
+  bvh.nodes.resize(1);
+  bvh.nodes[0].make_leaf(0, n);
+  bvh.root = 0;
+  bvh.ref_indices.resize(n);
+  std::iota(bvh.ref_indices.begin(), bvh.ref_indices.end(), 0u);
+  EXPECT_THROW(flatten_for_tracing(bvh, refs), Error);
 }
 
 }  // namespace

@@ -1,7 +1,10 @@
 // A flat tree without finalize, so the tests can tell a finalize fault from a traversal one.
 #include "bvhopt/testing/flatten_for_tracing.h"
 
+#include "bvhopt/error.h"
+
 #include <cmath>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -25,6 +28,10 @@ FlatBvh flatten_for_tracing(const Bvh& bvh, const PrimitiveRefs& refs) {
     f.box = n.box;
     if (n.is_leaf()) {
       f.index = static_cast<uint32_t>(out.triangle_ids.size());
+      // The flat node's count is 16 bits; casting would drop triangles without a word.
+      if (n.ref_count() > 0xffff)
+        throw Error("flatten_for_tracing: node " + std::to_string(it.node) + ": leaf holds " +
+                    std::to_string(n.ref_count()) + " references, more than 65535");
       f.count = static_cast<uint16_t>(n.ref_count());
       for (uint32_t i = 0; i < n.ref_count(); ++i)
         out.triangle_ids.push_back(refs.triangle_ids[bvh.ref_indices[n.first_ref() + i]]);
