@@ -8,6 +8,7 @@ namespace bvhopt::cli {
 void register_info_command(CLI::App& app);        // scene
 void register_build_command(CLI::App& app);       // build
 void register_optimize_command(CLI::App& app);    // optimize
+void register_bake_command(CLI::App& app);        // build + optimize + collapse in one step
 void register_compact_command(CLI::App& app);     // finalize
 void register_stats_command(CLI::App& app);       // measure
 void register_trace_command(CLI::App& app);       // trace

@@ -14,6 +14,7 @@ int main(int argc, char** argv) {
   bvhopt::cli::register_info_command(app);
   bvhopt::cli::register_build_command(app);
   bvhopt::cli::register_optimize_command(app);
+  bvhopt::cli::register_bake_command(app);
   bvhopt::cli::register_compact_command(app);
   bvhopt::cli::register_stats_command(app);
   bvhopt::cli::register_trace_command(app);

@@ -23,6 +23,7 @@
 #include "bvhopt/tree_rotations.h"
 #include "cli_common.h"
 #include "commands.h"
+#include "optimize_progress.h"
 
 namespace bvhopt::cli {
 namespace {
@@ -33,10 +34,12 @@ struct OptimizeOptions {
   ThreadsOption threads;
   CostOption cost;
   bool cost_given = false;  // --ct or --ci given: they replace a BVH file's own cost model
-  std::string method = std::string(optimizer_method_name(OptimizerMethod::anneal));
+  // Insertion by default: the lowest cost per second of the three (see README).
+  std::string method = std::string(optimizer_method_name(OptimizerMethod::insertion));
   // What every method shares: --passes, --time-limit and --seed (the cost model and the
   // callback are filled in at run time).
   OptimizerConfig shared;
+  std::string time_budget;  // --time-budget: seconds or a multiple of the build time; empty for none
   AnnealConfig anneal;
   bool no_keep_best = false;
   InsertionConfig insertion;
@@ -229,11 +232,12 @@ void run_optimize(const OptimizeOptions& opt) {
   ProgressLine progress;
   OptimizerConfig shared = opt.shared;
   shared.cost = in.info.cost;
-  shared.limits.on_pass = [&progress](const PassRecord& p) {
-    std::ostringstream line;
-    line << "pass " << p.pass << "  T " << format_double(p.temperature, 3) << "  cost " << format_double(p.cost, 4)
-         << "  best " << format_double(p.best_cost, 4) << "  " << format_double(p.seconds, 1) << " s";
-    progress.update(line.str());
+  if (!opt.time_budget.empty()) shared.limits.time_limit = parse_time_budget(opt.time_budget, in.build_seconds);
+  GainEstimate gain(sah_cost(in.bvh, in.info.cost));
+  const bool annealing = *method == OptimizerMethod::anneal;
+  shared.limits.on_pass = [&progress, &gain, annealing](const PassRecord& p) {
+    gain.add(p.best_cost);
+    progress.update(progress_text(p, gain, annealing));
   };
   OptimizeReport report = run_method(in.bvh, *method, opt, shared);
   progress.finish();
@@ -272,6 +276,11 @@ void register_optimize_command(CLI::App& app) {
                   "Stop after the pass that reaches this many seconds (0: none)")
       ->check(CLI::NonNegativeNumber)
       ->type_name("S");
+  cmd->add_option("--time-budget", opt->time_budget,
+                  "Like --time-limit (the best tree seen is kept), in seconds or, for a scene, as a multiple of "
+                  "its build time: 5x")
+      ->type_name("S|Nx")
+      ->excludes("--time-limit");
   cmd->add_option("--seed", opt->shared.seed, "Seed of every random choice")->capture_default_str();
   cmd->add_option("--cost-trace", opt->trace_path, "Write the cost after every pass as CSV")->type_name("FILE.csv");
   opt->evh.add_to(cmd);

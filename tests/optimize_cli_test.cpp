@@ -1,4 +1,4 @@
-// End-to-end tests of `bvhopt optimize` with the rotation methods: the written file, the
+// End-to-end tests of `bvhopt optimize` (mostly the rotation methods) and `bvhopt bake`: the written file, the
 // summary, the cost trace, and errors that name the input.
 #include <gtest/gtest.h>
 
@@ -89,6 +89,54 @@ TEST_F(OptimizeCli, SameSeedSameFileOnOneAndTwoThreads) {
   BvhFile fa = read_bvh_file(a), fb = read_bvh_file(b);
   EXPECT_EQ(sah_cost(fa.bvh, fa.info.cost), sah_cost(fb.bvh, fb.info.cost));
   EXPECT_EQ(fa.bvh.ref_indices, fb.bvh.ref_indices);  // compacted depth-first: same tree, same order
+}
+
+TEST_F(OptimizeCli, DefaultMethodIsInsertionAndTimeBudgetStopsOnTheBestTree) {
+  const fs::path a = dir_ / "a.bvh";
+  std::string out, err;
+  // A budget of 0x the build time stops after the first pass, on a tree no worse than the input.
+  ASSERT_EQ(run("optimize 'builtin:atrium?triangles=4000' --time-budget 0.0001x --threads 2 --json -o " + a.string(),
+                &out, &err),
+            0)
+      << err;
+  nlohmann::json j = nlohmann::json::parse(out);
+  EXPECT_EQ(j["method"], "insertion");
+  EXPECT_EQ(j["stop_reason"], "time limit");
+  EXPECT_EQ(j["passes"], 1);
+  EXPECT_LE(j["cost_after"].get<double>(), j["cost_before"].get<double>());
+  BvhFile file = read_bvh_file(a);
+  EXPECT_TRUE(validate(file.bvh, file.refs).ok());
+  EXPECT_NEAR(sah_cost(file.bvh, file.info.cost), j["cost_after"].get<double>(), 1e-9 * j["cost_after"].get<double>());
+  // A multiple of the build time needs a build; words are no budget; it excludes --time-limit.
+  EXPECT_EQ(run("optimize " + a.string() + " --time-budget 2x -o " + (dir_ / "x.bvh").string(), nullptr, &err), 1);
+  EXPECT_NE(err.find("build time"), std::string::npos) << err;
+  EXPECT_EQ(run("optimize " + a.string() + " --time-budget soon -o " + (dir_ / "x.bvh").string(), nullptr, &err), 1);
+  EXPECT_NE(err.find("soon"), std::string::npos) << err;
+  EXPECT_NE(run("optimize " + a.string() + " --time-budget 1 --time-limit 1 -o " + (dir_ / "x.bvh").string()), 0);
+}
+
+TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
+  const fs::path a = dir_ / "baked.bvh";
+  std::string out, err;
+  ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality best --threads 2 --json -o " + a.string(), &out, &err), 0)
+      << err;
+  nlohmann::json j = nlohmann::json::parse(out);
+  EXPECT_EQ(j["quality"], "best");
+  EXPECT_EQ(j["stop_reason"], "converged");  // best has no budget
+  EXPECT_EQ(j["time_budget_seconds"], 0.0);
+  EXPECT_LT(j["cost_optimized"].get<double>(), j["cost_built"].get<double>());
+  EXPECT_LT(j["cost"].get<double>(), j["cost_optimized"].get<double>());  // collapsing one-triangle leaves gains
+  EXPECT_GT(j["peak_rss_bytes"].get<uint64_t>(), 0u);
+  BvhFile file = read_bvh_file(a);
+  EXPECT_TRUE(validate(file.bvh, file.refs).ok());
+  EXPECT_EQ(file.info.method, "sweep+insertion+collapse");
+  EXPECT_NEAR(sah_cost(file.bvh, file.info.cost), j["cost"].get<double>(), 1e-9 * j["cost"].get<double>());
+  EXPECT_EQ(file.info.scene_triangles, j["triangles"].get<uint64_t>());
+
+  // An explicit budget replaces the quality's and is reported in seconds.
+  ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --time-budget 0 --json -o " + a.string(), &out, &err), 0) << err;
+  EXPECT_EQ(nlohmann::json::parse(out)["time_budget_seconds"], 0.0);
+  EXPECT_NE(run("bake 'builtin:atrium?triangles=4000' --quality perfect -o " + a.string()), 0);
 }
 
 TEST_F(OptimizeCli, BadInputsAreErrorsNamingTheInput) {
