@@ -100,7 +100,8 @@ BakeResult bake(const BakeOptions& opt) {
   r.collapse_seconds = collapse_clock.seconds();
   r.cost_final = c.cost_after;
   r.leaves = c.leaves_after;
-  // The wide layout (several children per node) goes here once the library has it.
+  // The file holds the binary tree: trace and render rebuild their wide layout (--layout
+  // bvh4|bvh8, wide_bvh.h) from it on load. A stored wide layout would be written here.
 
   BvhFileInfo info;
   info.cost = cost;
