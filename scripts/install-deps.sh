@@ -6,6 +6,7 @@ packages=(
   libassimp-dev libtbb-dev libcli11-dev nlohmann-json3-dev libstb-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libembree-dev python3 python3-matplotlib
+  python3-dev pybind11-dev python3-numpy python3-pytest
 )
 missing=()
 for p in "${packages[@]}"; do

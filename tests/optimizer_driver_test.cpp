@@ -155,6 +155,19 @@ TEST(OptimizerDriver, StopReasons) {
       EXPECT_EQ(r.stop_reason, StopReason::time_limit) << name;
       EXPECT_EQ(r.passes, 1u) << name;
     }
+    {
+      // A stop asked for after the second pass ends the run there with a valid tree no
+      // worse than the best seen.
+      Bvh bvh = start;
+      OptimizeLimits limits;
+      uint32_t asked = 0;
+      limits.stop_requested = [&] { return ++asked == 2; };
+      const OptimizeReport r = run(bvh, limits);
+      EXPECT_EQ(r.stop_reason, StopReason::interrupted) << name;
+      EXPECT_EQ(r.passes, 2u) << name;
+      EXPECT_TRUE(validate(bvh, refs).ok()) << name;
+      EXPECT_LE(r.final_cost, r.initial_cost) << name;
+    }
   }
 }
 
@@ -181,6 +194,7 @@ TEST(OptimizerDriver, StopReasonNamesAreTheFileWords) {
   EXPECT_EQ(stop_reason_name(StopReason::time_limit), "time limit");
   EXPECT_EQ(stop_reason_name(StopReason::empty_tree), "empty tree");
   EXPECT_EQ(stop_reason_name(StopReason::nothing_to_optimize), "nothing to optimize");
+  EXPECT_EQ(stop_reason_name(StopReason::interrupted), "interrupted");
   Bvh empty;
   EXPECT_EQ(optimize_insertion(empty).stop_reason, StopReason::empty_tree);
 }

@@ -25,8 +25,9 @@ enum class StopReason : uint8_t {
   time_limit,           // OptimizeLimits::time_limit
   empty_tree,           // no tree to optimize
   nothing_to_optimize,  // a tree too small (or of zero area) for any move
+  interrupted,          // OptimizeLimits::stop_requested
 };
-// "converged", "pass limit", "time limit", "empty tree", "nothing to optimize": the words the
+// "converged", "pass limit", "time limit", "empty tree", "nothing to optimize", "interrupted": the words the
 // command line's --json "stop_reason" and the experiment's files carry.
 std::string_view stop_reason_name(StopReason r);
 

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 
 #include "bvhopt/cost_model.h"
 #include "bvhopt/optimize_report.h"
@@ -14,6 +15,9 @@ struct OptimizeLimits {
   uint32_t max_passes = 0;  // stop after this many passes (over all stages of a method)
   double time_limit = 0.0;  // seconds since the optimizer started
   PassCallback on_pass;     // called after every pass (may be empty)
+  // Asked after every pass (after on_pass); true stops the run with the best tree so far
+  // (StopReason::interrupted). The Python module stops on Ctrl-C through it.
+  std::function<bool()> stop_requested;
 };
 
 // The base of HillClimbConfig, AnnealConfig and InsertionConfig.

@@ -9,6 +9,7 @@ std::string_view stop_reason_name(StopReason r) {
     case StopReason::time_limit: return "time limit";
     case StopReason::empty_tree: return "empty tree";
     case StopReason::nothing_to_optimize: return "nothing to optimize";
+    case StopReason::interrupted: return "interrupted";
   }
   return "converged";
 }

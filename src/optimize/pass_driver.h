@@ -101,6 +101,8 @@ class PassDriver {
       report_.stop_reason = StopReason::pass_limit;
     } else if (limits_.time_limit > 0.0 && rec.seconds >= limits_.time_limit) {
       report_.stop_reason = StopReason::time_limit;
+    } else if (limits_.stop_requested && limits_.stop_requested()) {
+      report_.stop_reason = StopReason::interrupted;
     } else {
       return false;
     }

@@ -1,0 +1,88 @@
+// bvhopt.build and bvhopt.load: where a Bvh comes from.
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <optional>
+#include <string>
+
+#include "bindings.h"
+#include "bvhopt/build.h"
+#include "bvhopt/edge_volume_subdivision.h"
+#include "bvhopt/error.h"
+#include "bvhopt/leaf_dedup.h"
+
+namespace bvhopt::python {
+namespace {
+
+std::string known_builders() {
+  std::string s;
+  for (BuilderKind k : all_builders()) s += (s.empty() ? "" : ", ") + std::string(builder_name(k));
+  return s;
+}
+
+// evh=None or False: one reference per triangle; True: the paper's t = 14; a number: that t.
+std::optional<EdgeVolumeConfig> evh_config(const py::object& evh) {
+  if (evh.is_none() || (py::isinstance<py::bool_>(evh) && !evh.cast<bool>())) return std::nullopt;
+  EdgeVolumeConfig config;
+  if (!py::isinstance<py::bool_>(evh)) {
+    if (!py::isinstance<py::int_>(evh)) throw Error("build: evh must be None, a bool or the threshold exponent t (an int)");
+    config.t = evh.cast<int>();
+    if (config.t < 0 || config.t > 62) throw Error("build: evh threshold exponent t must be in 0..62, got " + std::to_string(config.t));
+  }
+  return config;
+}
+
+Tree build(const Scene& scene, const std::string& builder, uint32_t leaf_size, double c_t, double c_i,
+           std::optional<int> threads, const py::object& evh, std::optional<uint32_t> bins) {
+  BuildOptions options;
+  const auto kind = parse_builder(builder);
+  if (!kind) throw Error("build: unknown builder '" + builder + "' (known: " + known_builders() + ")");
+  options.kind = *kind;
+  options.leaf.max_leaf_size = leaf_size;
+  options.cost = {c_t, c_i};
+  if (bins) {  // an explicit count holds at every node, as the command line's --bins
+    options.binned.bin_count = *bins;
+    options.binned.refs_per_bin = 0;
+  }
+  validate(options);
+  const std::optional<EdgeVolumeConfig> subdivide = evh_config(evh);
+  Tree tree;
+  {
+    py::gil_scoped_release unlocked;
+    auto limit = limit_threads(threads, "build");
+    tree.refs = subdivide ? subdivide_edge_volume(scene.mesh, *subdivide).refs : make_references(scene.mesh);
+    tree.bvh = build_bvh(tree.refs, options);
+    // Over subdivided references a leaf keeps one reference per triangle (as the command line).
+    if (subdivide) dedup_leaf_references(tree.bvh, tree.refs);
+  }
+  tree.info.cost = options.cost;
+  tree.info.scene_name = scene.mesh.name;
+  tree.info.scene_triangles = scene.mesh.triangle_count();
+  tree.info.method = subdivide ? "evh+" + builder : builder;
+  return tree;
+}
+
+Tree load(const py::object& path) {
+  const std::string file = path_text(path);
+  py::gil_scoped_release unlocked;
+  BvhFile f = read_bvh_file(file);
+  return Tree{std::move(f.bvh), std::move(f.refs), std::move(f.info)};
+}
+
+}  // namespace
+
+void register_build(py::module_& m) {
+  m.def("build", &build, py::arg("scene"), py::arg("builder") = "sweep", py::arg("leaf_size") = 1,
+        py::arg("c_t") = 3.0, py::arg("c_i") = 2.0, py::arg("threads") = py::none(), py::arg("evh") = py::none(),
+        py::arg("bins") = py::none(),
+        "Builds a BVH top-down: builder 'sweep' | 'binned' | 'spatial-median' | 'object-median'; evh=True (or "
+        "the exponent t) subdivides fat triangles first. The tree does not depend on threads.");
+  m.def("load", &load, py::arg("path"), "Reads a BVH file written by Bvh.save or the command line");
+  m.def("builders", [] {
+    py::list names;
+    for (BuilderKind k : all_builders()) names.append(std::string(builder_name(k)));
+    return names;
+  });
+}
+
+}  // namespace bvhopt::python

@@ -1,0 +1,129 @@
+// Bvh.trace: hit distances, triangle ids and steps per ray, and rays per second.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cstring>
+#include <optional>
+#include <string>
+
+#include "bindings.h"
+#include "bvhopt/binned_sah_builder.h"
+#include "bvhopt/error.h"
+#include "bvhopt/finalize.h"
+#include "bvhopt/ray_measure.h"
+#include "numpy_arrays.h"
+#include "trace_setup.h"
+
+namespace bvhopt::python {
+
+std::unique_ptr<Tracer> make_tracer(const Tree& tree, const Mesh& mesh, const std::string& where) {
+  if (tree.info.scene_triangles != mesh.triangle_count())
+    throw Error(where + ": the tree was built over scene '" + tree.info.scene_name + "' with " +
+                std::to_string(tree.info.scene_triangles) + " triangles, but scene '" + mesh.name + "' has " +
+                std::to_string(mesh.triangle_count()) + " (pass the scene the tree was built from)");
+  return std::make_unique<Tracer>(finalize(tree.bvh, tree.refs), mesh);
+}
+
+std::unique_ptr<Tracer> quick_tracer(const Mesh& mesh) {
+  PrimitiveRefs refs = make_references(mesh);
+  return std::make_unique<Tracer>(finalize(build_binned_sah(refs), refs), mesh);
+}
+
+namespace {
+
+// The layouts traversal reads; "bvh2" is the binary layout (two child boxes per node).
+const std::vector<std::string>& known_layouts() {
+  static const std::vector<std::string> names{"bvh2"};
+  return names;
+}
+
+struct TraceResult {
+  py::array_t<float> t;              // hit distance, inf for a miss
+  py::array_t<uint32_t> triangle_id;  // 0xffffffff for a miss
+  py::array_t<uint32_t> steps;        // inner nodes visited + leaves tested
+  py::array_t<uint32_t> triangle_tests;
+  double rays_per_second = 0.0;
+  double seconds = 0.0;
+  double hit_rate = 0.0;
+  double mean_steps = 0.0;
+  int threads = 0;
+};
+
+std::vector<Ray> rays_from(const py::array_t<float, py::array::c_style | py::array::forcecast>& array) {
+  require_columns(array, 8, "trace: rays");
+  std::vector<Ray> rays(static_cast<size_t>(array.shape(0)));
+  if (!rays.empty()) std::memcpy(rays.data(), array.data(), rays.size() * sizeof(Ray));
+  return rays;
+}
+
+TraceResult trace(const Tree& tree, const Scene& scene, const py::array_t<float, py::array::c_style | py::array::forcecast>& array,
+                  const std::string& layout, const std::string& query, const std::string& order,
+                  std::optional<int> threads, int repeats) {
+  const auto& layouts = known_layouts();
+  if (std::find(layouts.begin(), layouts.end(), layout) == layouts.end())
+    throw Error("trace: unknown layout '" + layout + "' (known: bvh2)");
+  if (query != "closest" && query != "any") throw Error("trace: query must be 'closest' or 'any', got '" + query + "'");
+  if (order != "split-axis" && order != "distance") throw Error("trace: order must be 'split-axis' or 'distance', got '" + order + "'");
+  if (repeats < 1) throw Error("trace: repeats must be at least 1, got " + std::to_string(repeats));
+  if (threads && *threads < 1) throw Error("trace: threads must be at least 1 (or None for all cores)");
+  const std::vector<Ray> rays = rays_from(array);
+  const RayQuery q = query == "any" ? RayQuery::any : RayQuery::closest;
+  MeasureOptions options;
+  options.order = order == "distance" ? ChildOrder::distance : ChildOrder::split_axis;
+  options.threads = threads.value_or(0);
+  options.repeats = repeats;
+  std::vector<Hit> hits;
+  std::vector<TraceCounters> counters;
+  RayMeasurement measured;
+  {
+    py::gil_scoped_release unlocked;
+    std::unique_ptr<Tracer> tracer = make_tracer(tree, scene.mesh, "trace");
+    trace_rays(*tracer, rays, q, hits, &counters, options.order);
+    measured = measure_rays(*tracer, rays, q, options);
+  }
+  std::vector<float> t(hits.size());
+  std::vector<uint32_t> ids(hits.size()), steps(hits.size()), tests(hits.size());
+  for (size_t i = 0; i < hits.size(); ++i) {
+    t[i] = hits[i].hit() ? hits[i].t : std::numeric_limits<float>::infinity();
+    ids[i] = hits[i].triangle_id;
+    steps[i] = counters[i].steps;
+    tests[i] = counters[i].triangle_tests;
+  }
+  TraceResult r;
+  r.t = take_array(std::move(t));
+  r.triangle_id = take_array(std::move(ids));
+  r.steps = take_array(std::move(steps));
+  r.triangle_tests = take_array(std::move(tests));
+  r.rays_per_second = measured.rays_per_second;
+  r.seconds = measured.seconds;
+  r.hit_rate = measured.hit_rate;
+  r.mean_steps = measured.steps.mean;
+  r.threads = measured.threads;
+  return r;
+}
+
+}  // namespace
+
+void register_trace(py::class_<Tree>& tree) {
+  py::class_<TraceResult>(tree, "TraceResult", "Per-ray hits and work, and the speed of the timed passes")
+      .def_readonly("t", &TraceResult::t, "Hit distance per ray (float32, inf for a miss)")
+      .def_readonly("triangle_id", &TraceResult::triangle_id, "Hit triangle per ray (uint32, 0xffffffff for a miss)")
+      .def_readonly("steps", &TraceResult::steps, "Traversal steps per ray: inner nodes visited + leaves tested")
+      .def_readonly("triangle_tests", &TraceResult::triangle_tests)
+      .def_readonly("rays_per_second", &TraceResult::rays_per_second, "Median over the timed passes")
+      .def_readonly("seconds", &TraceResult::seconds)
+      .def_readonly("hit_rate", &TraceResult::hit_rate)
+      .def_readonly("mean_steps", &TraceResult::mean_steps)
+      .def_readonly("threads", &TraceResult::threads)
+      .def("__repr__", [](const TraceResult& r) {
+        return "<TraceResult " + std::to_string(r.t.size()) + " rays, " + std::to_string(r.rays_per_second / 1e6) +
+               " Mrays/s, mean steps " + std::to_string(r.mean_steps) + ">";
+      });
+  tree.def("trace", &trace, py::arg("scene"), py::arg("rays"), py::arg("layout") = "bvh2", py::arg("query") = "closest",
+           py::arg("order") = "split-axis", py::arg("threads") = py::none(), py::arg("repeats") = 3,
+           "Traces an n x 8 float32 ray array (see bvhopt.rays) through the tree laid out as `layout` ('bvh2')");
+  tree.def_static("layouts", [] { return known_layouts(); });
+}
+
+}  // namespace bvhopt::python

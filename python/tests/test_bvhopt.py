@@ -1,0 +1,179 @@
+import json
+import os
+import pathlib
+import runpy
+import signal
+import subprocess
+import threading
+
+import numpy as np
+import pytest
+
+import bvhopt
+from conftest import SCENE
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return bvhopt.load_scene(SCENE)
+
+
+def run_cli(cli, *args):
+    out = subprocess.run([cli, *args, "--json"], check=True, capture_output=True, text=True).stdout
+    return json.loads(out)
+
+
+def test_scene_arrays_are_views_with_the_right_types(scene):
+    v, i = scene.vertices, scene.indices
+    assert v.dtype == np.float32 and v.shape == (scene.vertex_count, 3)
+    assert i.dtype == np.uint32 and i.shape == (scene.triangle_count, 3)
+    assert not v.flags.writeable and not v.flags.owndata
+    assert i.max() < scene.vertex_count
+
+
+def test_scene_from_arrays_round_trips(scene):
+    copy = bvhopt.Scene(scene.vertices, scene.indices)
+    np.testing.assert_array_equal(copy.vertices, scene.vertices)
+    np.testing.assert_array_equal(copy.indices, scene.indices)
+    assert bvhopt.build(copy).cost == bvhopt.build(scene).cost
+
+
+@pytest.mark.parametrize("builder", ["sweep", "binned", "spatial-median", "object-median"])
+def test_build_cost_equals_the_command_line(cli, tmp_path, scene, builder):
+    ref = run_cli(cli, "build", SCENE, "--builder", builder, "--leaf-size", "4", "-o", str(tmp_path / "a.bvh"))
+    bvh = bvhopt.build(scene, builder=builder, leaf_size=4)
+    assert bvh.cost == ref["cost"]
+    assert bvh.ocost == ref["ocost"]
+    assert bvh.stats()["nodes"] == ref["nodes"]
+    bvh.save(tmp_path / "b.bvh")
+    np.testing.assert_array_equal(bvhopt.load(tmp_path / "a.bvh").nodes, bvhopt.load(tmp_path / "b.bvh").nodes)
+
+
+@pytest.mark.parametrize("method,args", [("insertion", []), ("hill-climb", []),
+                                         ("anneal", ["--schedule-passes", "60"])])
+def test_optimize_equals_the_command_line(cli, tmp_path, scene, method, args):
+    ref = run_cli(cli, "optimize", SCENE, "--method", method, "--seed", "7", *args, "-o", str(tmp_path / "a.bvh"))
+    bvh = bvhopt.build(scene)
+    options = {"schedule_passes": 60} if method == "anneal" else {}
+    report = bvh.optimize(method, seed=7, **options)
+    assert report.final_cost == ref["cost_after"] == bvh.cost
+    assert report.passes == ref["passes"] and report.moves == ref["moves"]
+    assert report.cost.shape == (report.passes,) and report.cost.dtype == np.float64
+    assert report.best_cost[-1] <= report.initial_cost
+    bvh.validate()
+    bvh.save(tmp_path / "b.bvh")
+    np.testing.assert_array_equal(bvhopt.load(tmp_path / "a.bvh").nodes, bvhopt.load(tmp_path / "b.bvh").nodes)
+    np.testing.assert_array_equal(bvhopt.load(tmp_path / "a.bvh").references, bvhopt.load(tmp_path / "b.bvh").references)
+
+
+def test_nodes_describe_the_tree(scene):
+    bvh = bvhopt.build(scene, leaf_size=4)
+    nodes, refs = bvh.nodes, bvh.references
+    leaves = nodes[nodes["count"] > 0]
+    inner = nodes[nodes["count"] == 0]
+    assert len(leaves) + len(inner) == len(nodes) and len(leaves) == len(inner) + 1
+    assert sorted(refs.tolist()) == list(range(scene.triangle_count))
+    # every leaf box holds its triangles' vertices; every inner box its children's boxes
+    tri = scene.vertices[scene.indices]
+    for leaf in leaves[:200]:
+        pts = tri[refs[leaf["first"]:leaf["first"] + leaf["count"]]].reshape(-1, 3)
+        assert (pts >= leaf["min"]).all() and (pts <= leaf["max"]).all()
+    for node in inner[:200]:
+        for c in (node["left"], node["right"]):
+            assert (nodes[c]["min"] >= node["min"]).all() and (nodes[c]["max"] <= node["max"]).all()
+    stats = bvh.stats()
+    assert stats["inner_area_by_depth"].dtype == np.float64
+    assert stats["inner_area_by_depth"].sum() == pytest.approx(stats["inner_area_sum"])
+
+
+def test_collapse_reaches_ocost(scene):
+    bvh = bvhopt.build(scene)
+    ocost = bvh.ocost
+    result = bvh.collapse_leaves()
+    assert result["cost_after"] == pytest.approx(ocost) and bvh.cost == pytest.approx(ocost)
+    assert bvh.method == "sweep+compact"
+    bvh.validate()
+
+
+def test_save_and_load_round_trip(tmp_path, scene):
+    bvh = bvhopt.build(scene, evh=True)
+    bvh.save(str(tmp_path / "t.bvh"))
+    back = bvhopt.load(tmp_path / "t.bvh")
+    assert back.cost == bvh.cost and back.method == "evh+sweep"
+    np.testing.assert_array_equal(back.references, bvh.references)
+    back.validate()
+
+
+def test_rays_and_trace(cli, tmp_path, scene):
+    bvh = bvhopt.build(scene)
+    rays = bvhopt.rays(scene, "primary", count=4096, seed=3, bvh=bvh)
+    n = len(rays)  # the resolution nearest 4096 pixels at the camera's aspect
+    assert rays.dtype == np.float32 and rays.shape == (n, 8) and abs(n - 4096) < 100
+    np.testing.assert_allclose(np.linalg.norm(rays[:, 4:7], axis=1), 1.0, rtol=1e-5)
+    r = bvh.trace(scene, rays, repeats=1)
+    assert r.t.shape == (n,) and r.t.dtype == np.float32
+    assert r.triangle_id.dtype == np.uint32 and r.steps.dtype == np.uint32
+    hit = r.triangle_id != 0xFFFFFFFF
+    assert r.hit_rate == pytest.approx(hit.mean())
+    assert np.isinf(r.t[~hit]).all() and (r.t[hit] > 0).all()
+    assert r.mean_steps == pytest.approx(r.steps.mean()) and r.rays_per_second > 0
+    # another tree over the same scene finds the same hits
+    other = bvhopt.build(scene, builder="spatial-median").trace(scene, rays, repeats=1)
+    np.testing.assert_array_equal(other.t, r.t)
+    bvh.save(tmp_path / "t.bvh")
+    ref = run_cli(cli, "trace", str(tmp_path / "t.bvh"), "--scene", SCENE, "--rays", "primary",
+                  "--count", "4096", "--seed", "3")
+    assert ref["count"] == n and ref["hit_rate"] == pytest.approx(r.hit_rate)
+    assert ref["steps"]["mean"] == pytest.approx(r.mean_steps)
+
+
+def test_interrupt_keeps_the_best_tree_so_far(scene):
+    bvh = bvhopt.build(scene)
+    start = bvh.cost
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        report = bvh.optimize("anneal", schedule_passes=10**7)
+    finally:
+        timer.cancel()
+    assert report.stop_reason == "interrupted"
+    assert bvh.cost == report.final_cost <= start
+    bvh.validate()
+
+
+@pytest.mark.parametrize("call,message", [
+    (lambda s: bvhopt.load_scene("/nonexistent/scene.obj"), "/nonexistent/scene.obj"),
+    (lambda s: bvhopt.load_scene("builtin:nowhere"), "nowhere"),
+    (lambda s: bvhopt.load("/nonexistent/t.bvh"), "/nonexistent/t.bvh"),
+    (lambda s: bvhopt.Scene(np.zeros((3, 2), np.float32), np.zeros((1, 3), np.uint32)), "shape (3, 2)"),
+    (lambda s: bvhopt.Scene(np.zeros((3, 3), np.float32), np.array([[0, 1, 5]])), "out of range"),
+    (lambda s: bvhopt.Scene(np.zeros((3, 3), np.float32), np.array([[0, 1, -1]])), "-1"),
+    (lambda s: bvhopt.build(s, builder="octree"), "unknown builder 'octree'"),
+    (lambda s: bvhopt.build(s, leaf_size=0), "leaf"),
+    (lambda s: bvhopt.build(s, threads=0), "threads"),
+    (lambda s: bvhopt.build(s, evh=99), "0..62"),
+    (lambda s: bvhopt.build(s).optimize("annealing"), "unknown method 'annealing'"),
+    (lambda s: bvhopt.build(s).optimize("insertion", h=2), "has no option 'h'"),
+    (lambda s: bvhopt.build(s).optimize("insertion", form="diagonal"), "unknown form 'diagonal'"),
+    (lambda s: bvhopt.build(s).optimize("anneal", time_budget=-1), "time_budget"),
+    (lambda s: bvhopt.rays(s, "sideways"), "unknown kind 'sideways'"),
+    (lambda s: bvhopt.build(s).trace(s, np.zeros((4, 7), np.float32)), "shape (4, 7)"),
+    (lambda s: bvhopt.build(s).trace(s, np.zeros((4, 8), np.float32), layout="bvh16"), "unknown layout 'bvh16'"),
+    (lambda s: bvhopt.build(s).trace(bvhopt.load_scene("builtin?triangles=3000"), np.zeros((1, 8), np.float32)),
+     "pass the scene the tree was built from"),
+    (lambda s: bvhopt.build(s).save("/nonexistent/dir/t.bvh"), "/nonexistent/dir"),
+])
+def test_errors_raise_with_the_library_message(scene, call, message):
+    with pytest.raises(bvhopt.Error, match=None) as info:
+        call(scene)
+    assert message in str(info.value)
+
+
+def test_example_compare_methods_runs(tmp_path):
+    example = runpy.run_path(str(ROOT / "examples" / "python" / "compare_methods.py"))
+    rows = example["main"]("builtin?triangles=3000", str(tmp_path / "methods.png"))
+    assert [r[0] for r in rows] == ["sweep", "hill-climb", "anneal", "insertion"]
+    assert all(cost <= rows[0][1] for _, cost, _ in rows[1:])
+    assert (tmp_path / "methods.png").stat().st_size > 1000
