@@ -8,6 +8,7 @@
 #include <string>
 
 #include "bindings.h"
+#include "bvhopt/any_tracer.h"
 #include "bvhopt/binned_sah_builder.h"
 #include "bvhopt/error.h"
 #include "bvhopt/finalize.h"
@@ -32,10 +33,9 @@ std::unique_ptr<Tracer> quick_tracer(const Mesh& mesh) {
 
 namespace {
 
-// The layouts traversal reads; "bvh2" is the binary layout (two child boxes per node).
-const std::vector<std::string>& known_layouts() {
-  static const std::vector<std::string> names{"bvh2"};
-  return names;
+std::vector<std::string> known_layouts() {
+  return {std::string(trace_layout_name(TraceLayout::bvh2)), std::string(trace_layout_name(TraceLayout::bvh4)),
+          std::string(trace_layout_name(TraceLayout::bvh8))};
 }
 
 struct TraceResult {
@@ -60,9 +60,8 @@ std::vector<Ray> rays_from(const py::array_t<float, py::array::c_style | py::arr
 TraceResult trace(const Tree& tree, const Scene& scene, const py::array_t<float, py::array::c_style | py::array::forcecast>& array,
                   const std::string& layout, const std::string& query, const std::string& order,
                   std::optional<int> threads, int repeats) {
-  const auto& layouts = known_layouts();
-  if (std::find(layouts.begin(), layouts.end(), layout) == layouts.end())
-    throw Error("trace: unknown layout '" + layout + "' (known: bvh2)");
+  const std::optional<TraceLayout> wide = parse_trace_layout(layout);
+  if (!wide) throw Error("trace: unknown layout '" + layout + "' (known: bvh2, bvh4, bvh8)");
   if (query != "closest" && query != "any") throw Error("trace: query must be 'closest' or 'any', got '" + query + "'");
   if (order != "split-axis" && order != "distance") throw Error("trace: order must be 'split-axis' or 'distance', got '" + order + "'");
   if (repeats < 1) throw Error("trace: repeats must be at least 1, got " + std::to_string(repeats));
@@ -78,9 +77,17 @@ TraceResult trace(const Tree& tree, const Scene& scene, const py::array_t<float,
   RayMeasurement measured;
   {
     py::gil_scoped_release unlocked;
-    std::unique_ptr<Tracer> tracer = make_tracer(tree, scene.mesh, "trace");
-    trace_rays(*tracer, rays, q, hits, &counters, options.order);
-    measured = measure_rays(*tracer, rays, q, options);
+    std::unique_ptr<Tracer> binary = make_tracer(tree, scene.mesh, "trace");
+    // bvh4 / bvh8: collapsed and laid out from the binary tree, as the command line's --layout.
+    std::unique_ptr<WideTracer> wide_tracer;
+    if (*wide != TraceLayout::bvh2) {
+      WideTracerOptions o;
+      o.layout.collapse.width = uint32_t(*wide);
+      wide_tracer = std::make_unique<WideTracer>(finalize(tree.bvh, tree.refs), scene.mesh, o);
+    }
+    const AnyTracer tracer = wide_tracer ? AnyTracer(*wide_tracer) : AnyTracer(*binary, options.order);
+    trace_rays(tracer, rays, q, hits, &counters);
+    measured = measure_rays(tracer, rays, q, options);
   }
   std::vector<float> t(hits.size());
   std::vector<uint32_t> ids(hits.size()), steps(hits.size()), tests(hits.size());
@@ -120,9 +127,9 @@ void register_trace(py::class_<Tree>& tree) {
         return "<TraceResult " + std::to_string(r.t.size()) + " rays, " + std::to_string(r.rays_per_second / 1e6) +
                " Mrays/s, mean steps " + std::to_string(r.mean_steps) + ">";
       });
-  tree.def("trace", &trace, py::arg("scene"), py::arg("rays"), py::arg("layout") = "bvh2", py::arg("query") = "closest",
+  tree.def("trace", &trace, py::arg("scene"), py::arg("rays"), py::arg("layout") = "bvh8", py::arg("query") = "closest",
            py::arg("order") = "split-axis", py::arg("threads") = py::none(), py::arg("repeats") = 3,
-           "Traces an n x 8 float32 ray array (see bvhopt.rays) through the tree laid out as `layout` ('bvh2')");
+           "Traces an n x 8 float32 ray array (see bvhopt.rays) through the tree laid out as `layout`: 'bvh8' (the default, as the command line's), 'bvh4' (wide SIMD nodes, collapsed from the binary tree) or 'bvh2' (binary nodes)");
   tree.def_static("layouts", [] { return known_layouts(); });
 }
 

@@ -112,7 +112,7 @@ def test_rays_and_trace(cli, tmp_path, scene):
     n = len(rays)  # the resolution nearest 4096 pixels at the camera's aspect
     assert rays.dtype == np.float32 and rays.shape == (n, 8) and abs(n - 4096) < 100
     np.testing.assert_allclose(np.linalg.norm(rays[:, 4:7], axis=1), 1.0, rtol=1e-5)
-    r = bvh.trace(scene, rays, repeats=1)
+    r = bvh.trace(scene, rays, layout="bvh2", repeats=1)
     assert r.t.shape == (n,) and r.t.dtype == np.float32
     assert r.triangle_id.dtype == np.uint32 and r.steps.dtype == np.uint32
     hit = r.triangle_id != 0xFFFFFFFF
@@ -120,11 +120,15 @@ def test_rays_and_trace(cli, tmp_path, scene):
     assert np.isinf(r.t[~hit]).all() and (r.t[hit] > 0).all()
     assert r.mean_steps == pytest.approx(r.steps.mean()) and r.rays_per_second > 0
     # another tree over the same scene finds the same hits
-    other = bvhopt.build(scene, builder="spatial-median").trace(scene, rays, repeats=1)
+    other = bvhopt.build(scene, builder="spatial-median").trace(scene, rays, layout="bvh2", repeats=1)
     np.testing.assert_array_equal(other.t, r.t)
+    for layout in ("bvh4", "bvh8"):  # the wide layouts (their own triangle test) agree to rounding
+        wide = bvh.trace(scene, rays, layout=layout, repeats=1)
+        np.testing.assert_array_equal(wide.triangle_id != 0xFFFFFFFF, hit)
+        np.testing.assert_allclose(wide.t[hit], r.t[hit], rtol=1e-4)
     bvh.save(tmp_path / "t.bvh")
     ref = run_cli(cli, "trace", str(tmp_path / "t.bvh"), "--scene", SCENE, "--rays", "primary",
-                  "--count", "4096", "--seed", "3")
+                  "--count", "4096", "--seed", "3", "--layout", "bvh2")
     assert ref["count"] == n and ref["hit_rate"] == pytest.approx(r.hit_rate)
     assert ref["steps"]["mean"] == pytest.approx(r.mean_steps)
 
