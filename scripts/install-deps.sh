@@ -7,6 +7,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libembree-dev python3 python3-matplotlib
   python3-dev pybind11-dev python3-numpy python3-pytest
+  clang-14 libclang-rt-14-dev
 )
 missing=()
 for p in "${packages[@]}"; do

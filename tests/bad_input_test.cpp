@@ -190,6 +190,17 @@ TEST_F(BadInput, PlyIndexOutOfRange) {
                   {"face 0: vertex index 5000 out of range (50 vertices)"});
 }
 
+// Found by fuzz/scene_file_fuzzer: assimp hung (minutes, no end) on this 183-byte file,
+// which the pre-check passed on to it because its first line is not exactly "ply".
+TEST_F(BadInput, PlyFirstLineWithMoreThanPlyIsRejected) {
+  const std::string header_rest =
+      "format ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "elelent fa(e 2\nproperty list uchar int vertex_indices\ne 6eleme\x01ply\nformat ascii 1.0\ne\n";
+  expect_rejected(write("nul.ply", std::string("ply\0\0\0\0\0\0\0\0\x0c\n", 12) + header_rest),
+                  {"first line is not exactly 'ply'"});
+  expect_rejected(write("space.ply", "ply extra\n" + header_rest), {"first line is not exactly 'ply'"});
+}
+
 TEST_F(BadInput, CorruptedBinaryPlyNeverCrashes) {
   // Random bytes overwritten all over a real scan: each copy either loads (the damage hit
   // only coordinates) or is rejected with an Error, and the process survives.

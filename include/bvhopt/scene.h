@@ -22,6 +22,14 @@ Mesh make_builtin_scene(const BuiltinSceneConfig& config = {});
 // (anything else, say a file called builtin.obj, is a path).
 bool is_builtin_scene_spec(const std::string& spec);
 
+// Above this the 32-bit vertex indices of a Mesh run out (about four vertices a triangle
+// is the worst the generator uses) and memory is far beyond this tool's machines.
+inline constexpr uint64_t kMaxBuiltinTriangles = 500'000'000;
+
+// The config a built-in scene spec names (see load_builtin_scene), without generating it.
+// Throws Error as load_builtin_scene does.
+BuiltinSceneConfig parse_builtin_scene_spec(const std::string& spec);
+
 // The built-in scene by name, as the command line takes it:
 //   "builtin" or "builtin:atrium"              default size
 //   "builtin:atrium?triangles=1000000&seed=7"  with options

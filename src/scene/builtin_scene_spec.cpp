@@ -11,10 +11,6 @@ namespace bvhopt {
 namespace {
 
 constexpr std::string_view kBuiltin = "builtin";
-// Above this the 32-bit vertex indices of a Mesh run out (about four vertices a triangle
-// is the worst the generator uses) and memory is far beyond this tool's machines.
-constexpr uint64_t kMaxBuiltinTriangles = 500'000'000;
-
 uint64_t parse_number(const std::string& spec, std::string_view key, std::string_view text) {
   uint64_t value = 0;
   const char* first = text.data();
@@ -28,7 +24,7 @@ uint64_t parse_number(const std::string& spec, std::string_view key, std::string
 
 }  // namespace
 
-Mesh load_builtin_scene(const std::string& spec) {
+BuiltinSceneConfig parse_builtin_scene_spec(const std::string& spec) {
   if (!is_builtin_scene_spec(spec))
     throw Error(spec + ": not the built-in scene (expected builtin[:atrium][?triangles=N&seed=S])");
   std::string_view rest = std::string_view(spec).substr(kBuiltin.size());
@@ -71,7 +67,11 @@ Mesh load_builtin_scene(const std::string& spec) {
       throw Error(spec + ": unknown option '" + std::string(key) + "' (available: triangles, seed)");
     }
   }
-  Mesh mesh = make_builtin_scene(config);
+  return config;
+}
+
+Mesh load_builtin_scene(const std::string& spec) {
+  Mesh mesh = make_builtin_scene(parse_builtin_scene_spec(spec));
   mesh.name = spec;
   return mesh;
 }

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer targets (preset `fuzz`), writes their seed corpora and runs each for
+# SECONDS_PER_TARGET seconds (default 30); exits non-zero on the first finding, whose input
+# libFuzzer writes to build/fuzz/findings/. Corpora grow in build/fuzz/corpus/ across runs.
+# Usage: scripts/run-fuzzers.sh [SECONDS_PER_TARGET [TARGET...]]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+seconds=${1:-30}
+shift || true
+targets=("$@")
+[ ${#targets[@]} -gt 0 ] || targets=(bvh_file ray_file scene_file builtin_spec pipeline)
+
+cmake --preset fuzz >/dev/null
+cmake --build --preset fuzz
+corpus=build/fuzz/corpus
+findings=build/fuzz/findings
+mkdir -p "$corpus" "$findings"
+./build/fuzz/fuzz/fuzz_seed_corpus "$corpus"
+export LSAN_OPTIONS="suppressions=$PWD/fuzz/lsan.supp${LSAN_OPTIONS:+:$LSAN_OPTIONS}"
+export UBSAN_OPTIONS="print_stacktrace=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}"
+for t in "${targets[@]}"; do
+  echo "== fuzzing $t for ${seconds} s"
+  # Inputs that once failed (fuzz/corpus/<target>/) are replayed first, with the seeds.
+  regressions=()
+  [ -d "fuzz/corpus/$t" ] && regressions=("fuzz/corpus/$t")
+  status=0
+  ./build/fuzz/fuzz/"${t}_fuzzer" -max_total_time="$seconds" -rss_limit_mb=2048 -timeout=25 \
+    -artifact_prefix="$findings/${t}-" -print_final_stats=1 "$corpus/$t" "${regressions[@]}" \
+    >"$findings/$t.log" 2>&1 || status=$?
+  grep -E "^stat::(number_of_executed_units|peak_rss_mb)" "$findings/$t.log" || true
+  if [ "$status" -ne 0 ]; then
+    tail -n 60 "$findings/$t.log" >&2
+    echo "fuzzer $t found a problem (exit $status); input in $findings/, log $findings/$t.log" >&2
+    exit 1
+  fi
+done
