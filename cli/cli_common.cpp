@@ -4,6 +4,7 @@
 #include <tbb/task_arena.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iomanip>
@@ -29,9 +30,21 @@ std::unique_ptr<tbb::global_control> ThreadsOption::apply() const {
 }
 
 int ThreadsOption::effective() const {
-  // global_control grants more threads than cores when asked, so a positive count is
-  // what runs.
-  return threads > 0 ? threads : tbb::this_task_arena::max_concurrency();
+  // global_control only lowers the parallelism: the default arena never runs more threads
+  // than the machine has cores, whatever count was asked for.
+  const int cores = tbb::this_task_arena::max_concurrency();
+  return threads > 0 ? std::min(threads, cores) : cores;
+}
+
+CLI::Validator finite_number() {
+  return CLI::Validator(
+      [](std::string& text) {
+        double value = 0.0;
+        if (CLI::detail::lexical_cast(text, value) && !std::isfinite(value))
+          return std::string("'" + text + "' is not a finite number");
+        return std::string();
+      },
+      "FINITE");
 }
 
 namespace {

@@ -18,6 +18,10 @@
 
 namespace bvhopt::cli {
 
+// Refuses NaN and infinities, which pass CLI11's range checks (every comparison with NaN is
+// false). Put it before the range check: `->check(finite_number())->check(CLI::Range(...))`.
+CLI::Validator finite_number();
+
 // --threads N (default: all cores). Keep the returned object alive for the command's run.
 struct ThreadsOption {
   int threads = 0;

@@ -12,6 +12,7 @@ void EvhOption::add_to(CLI::App* app) {
       ->capture_default_str();
   app->add_option("--evh-max-ratio", max_ratio,
                   "At most this many references per triangle in all; t is lowered until it fits (0: no limit)")
+      ->check(finite_number())
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
 }

@@ -81,12 +81,14 @@ void add_method_options(CLI::App* cmd, OptimizeOptions& opt) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_option("--h", opt.anneal.h, "anneal: hottest temperature, in Kensler's units (0.8-2.2)")
+      ->check(finite_number())
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_flag("--no-keep-best", opt.no_keep_best,
                 "anneal: return the last tree, not the best seen at the end of a pass");
 
   cmd->add_option("--batch", opt.insertion.batch, "insertion: fraction of the inner nodes updated per pass")
+      ->check(finite_number())
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   const std::vector<std::string> measures = names_of(insertion_measures(), measure_name);
@@ -274,6 +276,7 @@ void register_optimize_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--time-limit", opt->shared.limits.time_limit,
                   "Stop after the pass that reaches this many seconds (0: none)")
+      ->check(finite_number())
       ->check(CLI::NonNegativeNumber)
       ->type_name("S");
   cmd->add_option("--time-budget", opt->time_budget,

@@ -107,7 +107,10 @@ void register_render_command(CLI::App& app) {
       ->type_name("OUT.png");
   cmd->add_option("--width", opt->width, "Image width")->check(CLI::Range(1u, 16384u))->capture_default_str();
   cmd->add_option("--height", opt->height, "Image height")->check(CLI::Range(1u, 16384u))->capture_default_str();
-  cmd->add_option("--max-steps", opt->max_steps, "Steps shown as full red")->capture_default_str();
+  cmd->add_option("--max-steps", opt->max_steps, "Steps shown as full red (positive)")
+      ->check(finite_number())
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd->add_option("--range", opt->range, "Step difference shown as full red/blue")->capture_default_str();
   cmd->add_option("--order", opt->order, "axis | distance")->check(CLI::IsMember({"axis", "distance"}))->capture_default_str();
   opt->camera.add_to(cmd);

@@ -97,7 +97,8 @@ void run_stats(const StatsOptions& opt) {
 void register_stats_command(CLI::App& app) {
   auto opt = std::make_shared<StatsOptions>();
   CLI::App* cmd = app.add_subcommand("stats", "Print the cost and shape of a saved BVH");
-  cmd->add_option("file", opt->input, "BVH file")->required()->check(CLI::ExistingFile);
+  // Not CLI::ExistingFile: a missing file is bad input (exit 1), which read_bvh_file reports.
+  cmd->add_option("file", opt->input, "BVH file")->required();
   opt->cost.add_to(cmd);
   cmd->add_flag("--per-depth", opt->per_depth, "Also print the inner and leaf area sums per depth");
   cmd->add_flag("--json", opt->json, "Print JSON");

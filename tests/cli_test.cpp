@@ -140,4 +140,58 @@ TEST_F(Cli, EvhOnABvhFileIsRefused) {
   EXPECT_NE(r.err.find("--evh"), std::string::npos) << r.err;
 }
 
+// The exit codes of docs/errors.md: 1 bad input or a failed run, 2 bad usage.
+TEST_F(Cli, UnknownSubcommandIsAUsageErrorNamingIt) {
+  CliRun r = run("frobnicate");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("unknown subcommand 'frobnicate'"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("stats"), std::string::npos) << r.err;
+}
+
+TEST_F(Cli, BadOptionValuesAreUsageErrorsNamingTheOption) {
+  EXPECT_EQ(run("build builtin --no-such-option").exit_code, 2);
+  EXPECT_EQ(run("build builtin --leaf-size 0 -o " + (dir_ / "x.bvh").string()).exit_code, 2);
+}
+
+TEST_F(Cli, MissingBvhFileIsBadInputNotUsage) {
+  CliRun r = run("stats " + (dir_ / "no_such.bvh").string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.err.rfind("bvhopt: error: ", 0), 0u) << r.err;
+  EXPECT_NE(r.err.find("no_such.bvh"), std::string::npos) << r.err;
+}
+
+// NaN passes every range check (all its comparisons are false); each of these options must
+// refuse it, and infinity, by name.
+TEST_F(Cli, NonFiniteNumbersAreRefusedByName) {
+  fs::path bvh = dir_ / "t.bvh";
+  ASSERT_EQ(run("build 'builtin?triangles=2000' -o " + bvh.string()).exit_code, 0);
+  const std::string out = " -o " + (dir_ / "o.bvh").string();
+  const std::pair<std::string, std::string> cases[] = {
+      {"build builtin --ct nan" + out, "--ct"},
+      {"build builtin --ci inf" + out, "--ci"},
+      {"optimize " + bvh.string() + " --h nan" + out, "--h"},
+      {"optimize " + bvh.string() + " --method insertion --batch nan" + out, "--batch"},
+      {"optimize " + bvh.string() + " --time-limit nan" + out, "--time-limit"},
+      {"build builtin --evh --evh-max-ratio nan" + out, "--evh-max-ratio"},
+      {"render " + bvh.string() + " --scene 'builtin?triangles=2000' --max-steps nan --heatmap " +
+           (dir_ / "h.png").string(), "--max-steps"},
+      {"render " + bvh.string() + " --scene 'builtin?triangles=2000' --max-steps 0 --heatmap " +
+           (dir_ / "h.png").string(), "--max-steps"},
+      {"render " + bvh.string() + " --scene 'builtin?triangles=2000' --max-steps -5 --heatmap " +
+           (dir_ / "h.png").string(), "--max-steps"},
+  };
+  for (const auto& [command, option] : cases) {
+    CliRun r = run(command);
+    EXPECT_EQ(r.exit_code, 2) << command << "\n" << r.err;
+    EXPECT_NE(r.err.find(option), std::string::npos) << command << "\n" << r.err;
+  }
+}
+
+// oneTBB never runs more threads than there are cores, so that is what is reported.
+TEST_F(Cli, ThreadsAboveTheCoreCountAreReportedAsRun) {
+  CliRun r = run("build 'builtin?triangles=2000' --threads 4096 -o " + (dir_ / "t.bvh").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.find("4096 threads"), std::string::npos) << r.out;
+}
+
 }  // namespace
