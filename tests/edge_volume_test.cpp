@@ -3,6 +3,7 @@
 // force on a subdivided scene.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <array>
@@ -283,6 +284,92 @@ TEST(EdgeVolume, SameOutputOnOneAndTwoThreads) {
   EXPECT_EQ(a1.average, a2.average);
   EXPECT_EQ(a1.best, a2.best);
   EXPECT_EQ(a1.worst, a2.worst);
+}
+
+// The volume of the box of edge (a, b), in double as an independent oracle.
+double edge_box_volume(const Vec3& a, const Vec3& b) {
+  return std::abs(double(a.x) - b.x) * std::abs(double(a.y) - b.y) * std::abs(double(a.z) - b.z);
+}
+
+double largest_edge_box_volume(const Triangle& t) {
+  return std::max({edge_box_volume(t.v0, t.v1), edge_box_volume(t.v1, t.v2), edge_box_volume(t.v2, t.v0)});
+}
+
+// The stopping rule of section 2.2: no piece leaves the subdivision with an edge box above
+// eps_v = V / 2^t (no piece here hits the depth guard), and a piece is only split when it
+// had one: every triangle split at least once had a fat edge.
+TEST(EdgeVolume, EveryPieceEndsAtOrBelowTheThreshold) {
+  const Mesh mesh = testing::random_mesh(500, 4, true);
+  const Box bounds = describe(mesh).bounds;
+  const Vec3 extent = bounds.hi - bounds.lo;
+  const double volume = double(extent.x) * extent.y * extent.z;
+  for (int t : {4, 10, 16}) {
+    EdgeVolumeConfig config;
+    config.t = t;
+    config.max_reference_ratio = 0;
+    const SubdividedTriangles pieces = subdivide_edge_volume_triangles(mesh, config);
+    ASSERT_EQ(pieces.stats.depth_limited, 0u);
+    const double eps = volume / std::ldexp(1.0, t);
+    ASSERT_NEAR(pieces.stats.threshold, eps, eps * 1e-6) << "t " << t;
+    std::vector<size_t> count(mesh.triangle_count(), 0);
+    for (size_t i = 0; i < pieces.triangles.size(); ++i) {
+      EXPECT_LE(largest_edge_box_volume(pieces.triangles[i]), eps * (1 + 1e-6)) << "t " << t << ", piece " << i;
+      ++count[pieces.triangle_ids[i]];
+    }
+    size_t split = 0;
+    for (size_t tri = 0; tri < mesh.triangle_count(); ++tri) {
+      const bool fat = largest_edge_box_volume(mesh.triangle(tri)) > eps * (1 + 1e-6);
+      const bool thin = largest_edge_box_volume(mesh.triangle(tri)) < eps * (1 - 1e-6);
+      if (thin) EXPECT_EQ(count[tri], 1u) << "t " << t << ": triangle " << tri << " split without a fat edge";
+      if (fat) EXPECT_GT(count[tri], 1u) << "t " << t << ": triangle " << tri << " kept a fat edge";
+      split += count[tri] > 1;
+    }
+    EXPECT_GT(split, 0u) << "t " << t << " split nothing: the test proves nothing";
+  }
+}
+
+// One split (max_depth 1) of a triangle whose three edges have boxes of volume 8 (AB),
+// 6 (AC) and 3 (BC): the new vertex is the midpoint of AB, the largest, in both pieces.
+TEST(EdgeVolume, TheSplitEdgeIsTheOneWithTheLargestBox) {
+  Mesh mesh;
+  mesh.name = "three edges";
+  const Vec3 a(0, 0, 0), b(4, 2, 1), c(1, 3, 2);
+  for (const Vec3& v : {a, b, c}) mesh.add_vertex(v);
+  mesh.add_triangle(0, 1, 2);
+  for (const auto& [order, label] : {std::pair{std::array<uint32_t, 3>{0, 1, 2}, "abc"},
+                                     std::pair{std::array<uint32_t, 3>{2, 0, 1}, "cab"},
+                                     std::pair{std::array<uint32_t, 3>{1, 2, 0}, "bca"}}) {
+    mesh.indices.assign(order.begin(), order.end());
+    EdgeVolumeConfig config;
+    config.t = 30;
+    config.max_depth = 1;
+    config.max_reference_ratio = 0;
+    const SubdividedTriangles pieces = subdivide_edge_volume_triangles(mesh, config);
+    ASSERT_EQ(pieces.triangles.size(), 2u) << label;
+    const Vec3 mid_ab(2, 1, 0.5f);
+    for (const Triangle& t : pieces.triangles) {
+      const bool has_mid = t.v0 == mid_ab || t.v1 == mid_ab || t.v2 == mid_ab;
+      EXPECT_TRUE(has_mid) << label << ": a piece without the midpoint of the largest edge box";
+      const bool has_c = t.v0 == c || t.v1 == c || t.v2 == c;
+      EXPECT_TRUE(has_c) << label << ": the corner opposite the split edge is in both pieces";
+    }
+  }
+}
+
+// More threads than cores (an arena of 8): the same references as on one thread.
+TEST(EdgeVolume, SameOutputInAnArenaOfEight) {
+  const Mesh mesh = testing::random_mesh(20000, 4, true);
+  EdgeVolumeConfig config;
+  config.t = 18;
+  EdgeVolumeResult one, eight;
+  {
+    tbb::global_control gc(tbb::global_control::max_allowed_parallelism, 1);
+    one = subdivide_edge_volume(mesh, config);
+  }
+  tbb::task_arena arena(8);
+  arena.execute([&] { eight = subdivide_edge_volume(mesh, config); });
+  EXPECT_EQ(one.refs.boxes, eight.refs.boxes);
+  EXPECT_EQ(one.refs.triangle_ids, eight.refs.triangle_ids);
 }
 
 TEST(EdgeVolume, DepthGuardIsRespected) {
