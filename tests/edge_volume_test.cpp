@@ -301,7 +301,7 @@ double largest_edge_box_volume(const Triangle& t) {
 TEST(EdgeVolume, EveryPieceEndsAtOrBelowTheThreshold) {
   const Mesh mesh = testing::random_mesh(500, 4, true);
   const Box bounds = describe(mesh).bounds;
-  const Vec3 extent = bounds.hi - bounds.lo;
+  const Vec3 extent = bounds.extent();
   const double volume = double(extent.x) * extent.y * extent.z;
   for (int t : {4, 10, 16}) {
     EdgeVolumeConfig config;
@@ -320,8 +320,12 @@ TEST(EdgeVolume, EveryPieceEndsAtOrBelowTheThreshold) {
     for (size_t tri = 0; tri < mesh.triangle_count(); ++tri) {
       const bool fat = largest_edge_box_volume(mesh.triangle(tri)) > eps * (1 + 1e-6);
       const bool thin = largest_edge_box_volume(mesh.triangle(tri)) < eps * (1 - 1e-6);
-      if (thin) EXPECT_EQ(count[tri], 1u) << "t " << t << ": triangle " << tri << " split without a fat edge";
-      if (fat) EXPECT_GT(count[tri], 1u) << "t " << t << ": triangle " << tri << " kept a fat edge";
+      if (thin) {
+        EXPECT_EQ(count[tri], 1u) << "t " << t << ": triangle " << tri << " split without a fat edge";
+      }
+      if (fat) {
+        EXPECT_GT(count[tri], 1u) << "t " << t << ": triangle " << tri << " kept a fat edge";
+      }
       split += count[tri] > 1;
     }
     EXPECT_GT(split, 0u) << "t " << t << " split nothing: the test proves nothing";
