@@ -6,6 +6,7 @@
 #include <string>
 
 #include "bvhopt/error.h"
+#include "layout/box_padding.h"
 
 namespace bvhopt {
 namespace {
@@ -27,20 +28,6 @@ void check_flat_references(const FlatBvh& bvh) {
                   " is not a later node (the tree has " + std::to_string(n) + " nodes)");
     }
   }
-}
-
-// The slab test is exact up to the 1+2*gamma_3 scaling, but the triangle test is
-// watertight, not exact: it may accept a ray that passes a few ulps (of the
-// vertex-to-origin distance) outside a triangle, e.g. through the far side of a shared
-// vertex, whose box the exact ray then misses. Boxes grow by 2^-17 of the largest
-// coordinate (about 64 ulps), which covers that error for origins up to about ten scene
-// sizes away; the cost is a few more box hits at grazing angles.
-float box_padding(const FlatBvh& bvh) {
-  float largest = 0.0f;
-  for (const FlatNode& f : bvh.nodes)
-    for (float c : {f.box.min.x, f.box.min.y, f.box.min.z, f.box.max.x, f.box.max.y, f.box.max.z})
-      if (std::isfinite(c)) largest = std::max(largest, std::fabs(c));
-  return largest * 0x1p-17f;
 }
 
 // One BinaryNode per inner flat node, numbered in the flat (depth-first) order so a left
@@ -103,7 +90,7 @@ BinaryLayout make_binary_layout(const FlatBvh& bvh, const Mesh& mesh) {
   check_flat_references(bvh);
   BinaryLayout out;
   out.mesh_triangles = mesh.triangle_count();
-  lay_out_nodes(bvh, box_padding(bvh), out);
+  lay_out_nodes(bvh, detail::box_padding(bvh), out);
   lay_out_leaf_vertices(bvh, mesh, out);
   return out;
 }

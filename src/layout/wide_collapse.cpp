@@ -14,7 +14,6 @@ namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr uint32_t kNoSet = 0xffffffffu;
-constexpr uint32_t kMaxWidth = 8;
 constexpr uint32_t kMaxLeafTriangles = 4 * kWideMaxBlocks;
 
 uint32_t left_of(uint32_t n) { return n + 1; }

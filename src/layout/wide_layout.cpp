@@ -12,6 +12,7 @@
 
 #include "bvhopt/error.h"
 #include "bvhopt/wide_bvh.h"
+#include "layout/box_padding.h"
 
 namespace bvhopt {
 
@@ -25,19 +26,6 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
-// Padding of every child box, as the binary tracer pads its boxes and for the same reason:
-// the triangle tests accept rays a few ulps (of the vertex-to-origin distance) outside a
-// triangle, and the slab test with a fused origin * rdir term rounds by up to an ulp of
-// |org * rdir|. 2^-17 of the largest coordinate covers both for origins up to about a hundred
-// scene sizes away.
-float box_padding(const FlatBvh& bvh) {
-  float largest = 0.0f;
-  for (const FlatNode& f : bvh.nodes)
-    for (float c : {f.box.min.x, f.box.min.y, f.box.min.z, f.box.max.x, f.box.max.y, f.box.max.z})
-      if (std::isfinite(c)) largest = std::max(largest, std::fabs(c));
-  return largest * 0x1p-17f;
 }
 
 // The arena as it is written: 32-byte units, nodes on 64-byte boundaries, in one block of
@@ -103,7 +91,7 @@ class LayoutBuilder {
 
  public:
   LayoutBuilder(const CollapsedBvh& wide, const FlatBvh& bvh, const Mesh& mesh, TriangleTest test)
-      : wide_(wide), bvh_(bvh), mesh_(mesh), test_(test), pad_(box_padding(bvh)), arena_(arena_bound(wide)) {}
+      : wide_(wide), bvh_(bvh), mesh_(mesh), test_(test), pad_(detail::box_padding(bvh)), arena_(arena_bound(wide)) {}
 
   // Every node, and every leaf's blocks with a 64-byte alignment gap.
   static size_t arena_bound(const CollapsedBvh& wide) {
