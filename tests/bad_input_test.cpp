@@ -191,7 +191,8 @@ TEST_F(BadInput, PlyIndexOutOfRange) {
 }
 
 // Found by fuzz/scene_file_fuzzer: assimp hung (minutes, no end) on this 183-byte file,
-// which the pre-check passed on to it because its first line is not exactly "ply".
+// and on one whose "ply" came after a blank line, which the pre-check passed on to it
+// because their first line is not exactly "ply".
 TEST_F(BadInput, PlyFirstLineWithMoreThanPlyIsRejected) {
   const std::string header_rest =
       "format ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
@@ -199,6 +200,7 @@ TEST_F(BadInput, PlyFirstLineWithMoreThanPlyIsRejected) {
   expect_rejected(write("nul.ply", std::string("ply\0\0\0\0\0\0\0\0\x0c\n", 12) + header_rest),
                   {"first line is not exactly 'ply'"});
   expect_rejected(write("space.ply", "ply extra\n" + header_rest), {"first line is not exactly 'ply'"});
+  expect_rejected(write("blank_first.ply", "\nply\n" + header_rest), {"first line is not exactly 'ply'"});
 }
 
 TEST_F(BadInput, CorruptedBinaryPlyNeverCrashes) {
