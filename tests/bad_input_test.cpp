@@ -203,6 +203,46 @@ TEST_F(BadInput, PlyFirstLineWithMoreThanPlyIsRejected) {
   expect_rejected(write("blank_first.ply", "\nply\n" + header_rest), {"first line is not exactly 'ply'"});
 }
 
+// Found by fuzz/scene_file_fuzzer: a misspelt "property" line was skipped by the pre-check
+// and by assimp alike, which then read the data by another layout and aborted on an
+// assertion (exit 134).
+TEST_F(BadInput, PlyUnknownHeaderKeywordIsRejected) {
+  const std::string ply =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\npropertirrmeshy float z\n"
+      "element face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n1 1 1\n; 0 1 2\n3 1 2 3\n";
+  expect_rejected(write("keyword.ply", ply), {"header line 6", "unknown keyword 'propertirrmeshy'"});
+  // comment and obj_info lines are the format's own and stay allowed.
+  std::string fine = small_ply(true, 50);
+  fine.insert(fine.find("1.0\n") + 4, "comment made by hand\nobj_info none\n");
+  EXPECT_EQ(load_mesh_file(write("comment.ply", fine)).triangle_count(), 48u);
+}
+
+// Messages show the file's text with control bytes escaped, and a negative count as
+// written, not as 2^64 minus it.
+TEST_F(BadInput, PlyMessagesShowNoRawBytesAndNoWrappedCounts) {
+  try {
+    load_mesh_file(write("bytes.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty \x1b[31mred\x07 x\n"));
+    ADD_FAILURE() << "loaded";
+  } catch (const Error& e) {
+    const std::string msg = e.what();
+    EXPECT_EQ(msg.find('\x1b'), std::string::npos) << msg;
+    EXPECT_EQ(msg.find('\x07'), std::string::npos) << msg;
+  }
+  expect_rejected(write("negative.ply", "ply\nformat ascii 1.0\nelement vertex -5\nend_header\n"),
+                  {"'element vertex -5'", "non-negative integer"});
+  try {
+    load_mesh_file(write("negative2.ply", "ply\nformat ascii 1.0\nelement vertex -5\nend_header\n"));
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()).find("18446744073709551611"), std::string::npos) << e.what();
+  }
+  try {
+    load_mesh_file(write("ctl.ply", "ply\nformat ascii\x01\x02 1.0\nelement vertex 1\nend_header\n"));
+    ADD_FAILURE() << "loaded";
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()).find('\x01'), std::string::npos) << e.what();
+  }
+}
+
 TEST_F(BadInput, CorruptedBinaryPlyNeverCrashes) {
   // Random bytes overwritten all over a real scan: each copy either loads (the damage hit
   // only coordinates) or is rejected with an Error, and the process survives.
