@@ -17,6 +17,7 @@ findings=build/fuzz/findings
 mkdir -p "$corpus" "$findings"
 ./build/fuzz/fuzz/fuzz_seed_corpus "$corpus"
 export LSAN_OPTIONS="suppressions=$PWD/fuzz/lsan.supp${LSAN_OPTIONS:+:$LSAN_OPTIONS}"
+export ASAN_OPTIONS="suppressions=$PWD/fuzz/asan.supp${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
 export UBSAN_OPTIONS="print_stacktrace=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}"
 for t in "${targets[@]}"; do
   echo "== fuzzing $t for ${seconds} s"

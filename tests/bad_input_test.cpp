@@ -217,6 +217,22 @@ TEST_F(BadInput, PlyUnknownHeaderKeywordIsRejected) {
   EXPECT_EQ(load_mesh_file(write("comment.ply", fine)).triangle_count(), 48u);
 }
 
+// Found by fuzz/scene_file_fuzzer: assimp reads an ASCII PLY one element per line, so a line
+// with more or fewer values than the properties made it read another layout than the one
+// checked and abort on an assertion.
+TEST_F(BadInput, PlyAsciiElementsFillTheirLineExactly) {
+  const std::string header =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 2\nproperty list uchar int vertex_indices\nend_header\n";
+  expect_rejected(write("long_line.ply", header + "0 0 0\n1 0 0\n0 1 0\n1 1 1 3 0 1 2\n3 1 2 3\n"),
+                  {"vertex 3: more values on its line"});
+  expect_rejected(write("short_line.ply", header + "0 0 0\n1 0\n0 0 1 0\n1 1 1\n3 0 1 2\n3 1 2 3\n"),
+                  {"vertex 1: fewer values on its line"});
+  EXPECT_EQ(load_mesh_file(write("exact.ply", header + "0 0 0\n1 0 0\n0 1 0\n1 1 1\n3 0 1 2\n3 1 2 3\n"))
+                .triangle_count(),
+            2u);
+}
+
 // Messages show the file's text with control bytes escaped, and a negative count as
 // written, not as 2^64 minus it.
 TEST_F(BadInput, PlyMessagesShowNoRawBytesAndNoWrappedCounts) {

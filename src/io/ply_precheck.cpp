@@ -118,15 +118,18 @@ PlyHeader read_ply_header(std::istream& in, const std::string& where) {
   return h;
 }
 
-// Assimp fills the faces of a short ASCII file with whatever it finds; walk the
-// whitespace-separated numbers instead.
+// Assimp fills the faces of a short ASCII file with whatever it finds, and reads one
+// element per line: a line with more or fewer values than the header's properties shifts
+// its reading against this walk (found by fuzz/scene_file_fuzzer: an assertion aborted the
+// program). So each element is walked on its own line, and must fill it exactly.
 void check_ascii_ply(const std::vector<char>& data, const PlyHeader& h, const std::string& where) {
   const uint64_t vertex_count = h.vertex_count();
-  size_t at = 0;
+  size_t at = 0, line_end = 0;
+  auto is_blank = [](char c) { return c == ' ' || c == '\t' || c == '\r'; };
   auto next_token = [&](std::string_view& token) {
-    while (at < data.size() && std::isspace(static_cast<unsigned char>(data[at]))) ++at;
+    while (at < line_end && is_blank(data[at])) ++at;
     const size_t start = at;
-    while (at < data.size() && !std::isspace(static_cast<unsigned char>(data[at]))) ++at;
+    while (at < line_end && !is_blank(data[at])) ++at;
     token = std::string_view(data.data() + start, at - start);
     return at > start;
   };
@@ -138,10 +141,15 @@ void check_ascii_ply(const std::vector<char>& data, const PlyHeader& h, const st
   for (const PlyElement& e : h.elements) {
     const bool is_face = e.name == "face";
     auto short_by = [&](uint64_t index) {
+      if (line_end < data.size())
+        return Error(where + ": " + e.name + " " + std::to_string(index) +
+                     ": fewer values on its line than the header's properties");
       return Error(where + ": truncated: the data ends in " + e.name + " " + std::to_string(index) + " of " +
                    std::to_string(e.count));
     };
-    for (uint64_t i = 0; i < e.count; ++i)
+    for (uint64_t i = 0; i < e.count; ++i) {
+      line_end = at;
+      while (line_end < data.size() && data[line_end] != '\n') ++line_end;
       for (const PlyProperty& prop : e.properties) {
         if (!next_token(token)) throw short_by(i);
         if (!prop.count_size) continue;
@@ -156,6 +164,11 @@ void check_ascii_ply(const std::vector<char>& data, const PlyHeader& h, const st
                         "' out of range (" + std::to_string(vertex_count) + " vertices)");
         }
       }
+      if (next_token(token))
+        throw Error(where + ": " + e.name + " " + std::to_string(i) + ": more values on its line than the header's " +
+                    "properties ('" + printable(token) + "')");
+      at = line_end + 1;
+    }
   }
 }
 
