@@ -19,13 +19,17 @@ mkdir -p "$corpus" "$findings"
 export LSAN_OPTIONS="suppressions=$PWD/fuzz/lsan.supp${LSAN_OPTIONS:+:$LSAN_OPTIONS}"
 export ASAN_OPTIONS="suppressions=$PWD/fuzz/asan.supp${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
 export UBSAN_OPTIONS="print_stacktrace=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}"
+reproducible=()
+if [ -n "${BVHOPT_FUZZ_RUNS:-}" ]; then
+  reproducible=(-runs="$BVHOPT_FUZZ_RUNS" -seed="${BVHOPT_FUZZ_SEED:-1}")
+fi
 for t in "${targets[@]}"; do
   echo "== fuzzing $t for ${seconds} s"
   # Inputs that once failed (fuzz/corpus/<target>/) are replayed first, with the seeds.
   regressions=()
   [ -d "fuzz/corpus/$t" ] && regressions=("fuzz/corpus/$t")
   status=0
-  ./build/fuzz/fuzz/"${t}_fuzzer" -max_total_time="$seconds" -rss_limit_mb=2048 -timeout=25 \
+  ./build/fuzz/fuzz/"${t}_fuzzer" -max_total_time="$seconds" "${reproducible[@]}" -rss_limit_mb=2048 -timeout=25 \
     -artifact_prefix="$findings/${t}-" -print_final_stats=1 "$corpus/$t" "${regressions[@]}" \
     >"$findings/$t.log" 2>&1 || status=$?
   grep -E "^stat::(number_of_executed_units|peak_rss_mb)" "$findings/$t.log" || true
