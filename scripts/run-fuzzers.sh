@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (preset `fuzz`), writes their seed corpora and runs each for
 # SECONDS_PER_TARGET seconds (default 30); exits non-zero on the first finding, whose input
-# libFuzzer writes to build/fuzz/findings/. Corpora grow in build/fuzz/corpus/ across runs.
+# libFuzzer writes to build/<preset>/findings/. Corpora grow in build/<preset>/corpus/ across runs.
 # Usage: scripts/run-fuzzers.sh [SECONDS_PER_TARGET [TARGET...]]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -10,12 +10,16 @@ shift || true
 targets=("$@")
 [ ${#targets[@]} -gt 0 ] || targets=(bvh_file ray_file scene_file builtin_spec pipeline)
 
-cmake --preset fuzz >/dev/null
-cmake --build --preset fuzz
-corpus=build/fuzz/corpus
-findings=build/fuzz/findings
+# BVHOPT_FUZZ_PRESET=sanitize runs the fuzzers of the sanitizer build (CI builds them there,
+# one clang build for both); by default the preset `fuzz`, which builds only the fuzzers.
+preset=${BVHOPT_FUZZ_PRESET:-fuzz}
+cmake --preset "$preset" >/dev/null
+cmake --build --preset "$preset"
+build=build/$preset
+corpus=$build/corpus
+findings=$build/findings
 mkdir -p "$corpus" "$findings"
-./build/fuzz/fuzz/fuzz_seed_corpus "$corpus"
+./$build/fuzz/fuzz_seed_corpus "$corpus"
 export LSAN_OPTIONS="suppressions=$PWD/fuzz/lsan.supp${LSAN_OPTIONS:+:$LSAN_OPTIONS}"
 export ASAN_OPTIONS="suppressions=$PWD/fuzz/asan.supp${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
 export UBSAN_OPTIONS="print_stacktrace=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}"
@@ -29,7 +33,7 @@ for t in "${targets[@]}"; do
   regressions=()
   [ -d "fuzz/corpus/$t" ] && regressions=("fuzz/corpus/$t")
   status=0
-  ./build/fuzz/fuzz/"${t}_fuzzer" -max_total_time="$seconds" "${reproducible[@]}" -rss_limit_mb=2048 -timeout=25 \
+  ./$build/fuzz/"${t}_fuzzer" -max_total_time="$seconds" "${reproducible[@]}" -rss_limit_mb=2048 -timeout=25 \
     -artifact_prefix="$findings/${t}-" -print_final_stats=1 "$corpus/$t" "${regressions[@]}" \
     >"$findings/$t.log" 2>&1 || status=$?
   grep -E "^stat::(number_of_executed_units|peak_rss_mb)" "$findings/$t.log" || true

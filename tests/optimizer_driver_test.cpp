@@ -127,7 +127,10 @@ std::vector<std::pair<std::string, Runner>> every_optimizer() {
 TEST(OptimizerDriver, StopReasons) {
   PrimitiveRefs refs = testing::random_refs(2000, 23);
   const Bvh start = build_spatial_median(refs);
-  for (const auto& [name, run] : every_optimizer()) {
+  // Not a structured binding: clang 14 (the sanitizer build) cannot capture one in a lambda.
+  for (const auto& optimizer : every_optimizer()) {
+    const std::string& name = optimizer.first;
+    const Runner& run = optimizer.second;
     {
       Bvh bvh = start;
       const OptimizeReport r = run(bvh, OptimizeLimits{});
