@@ -15,6 +15,7 @@
 #include "optimize/find_by_name.h"
 #include "optimize/pass_driver.h"
 #include "optimize/reinsertion_search.h"
+#include "optimize/undo_log.h"
 
 namespace bvhopt {
 
@@ -96,17 +97,14 @@ class InsertionOptimizer {
   // The sequential form can raise the cost (both children are out at once) and oscillates
   // near the end, so it keeps the best tree it has seen. The parallel form never raises it.
   bool keep_best_before(uint32_t /*pass*/) const { return !parallel_; }
-  struct Snapshot {
-    std::vector<BvhNode> nodes;
-    uint32_t root;
-    double inner_area;
-  };
-  Snapshot snapshot() const { return {bvh_.nodes, bvh_.root, inner_area_}; }
-  void restore(Snapshot s) {
-    bvh_.nodes = std::move(s.nodes);
-    bvh_.root = s.root;
-    inner_area_ = s.inner_area;
+  // The best tree is kept as an undo log from it, not a copy: only one restore point is
+  // ever live (the driver takes the next only after dropping the last), so the token is empty.
+  struct Snapshot {};
+  Snapshot snapshot() {
+    undo_.begin(bvh_, inner_area_);
+    return {};
   }
+  void restore(Snapshot) { undo_.restore(bvh_, inner_area_); }
 
   detail::PassResult run_pass(uint32_t pass, double stage_best) {
     // Once the measure has stalled, selection stays random (section 2.5): going back to the
@@ -172,13 +170,21 @@ class InsertionOptimizer {
     if (n == bvh_.root || bvh_[n].is_leaf()) return 0;
     auto [a, b] = ordered_children(n);
     const uint32_t p = bvh_[n].parent;
+    const uint32_t s = bvh_.sibling(n);
     remove(n);
-    ReinsertionCandidate ca = detail::search_reinsertion(bvh_, bvh_[a].box, kInvalidNode, kInvalidNode, heap_);
-    insert(a, ca.node, n);
-    ReinsertionCandidate cb = detail::search_reinsertion(bvh_, bvh_[b].box, kInvalidNode, kInvalidNode, heap_);
-    insert(b, cb.node, p);
+    // Both searches start from N's sibling, which took P's place: the children's old
+    // neighbourhood, usually close to their best place, so the bound prunes from the start.
+    insert(a, search_from(a, s), n);
+    insert(b, search_from(b, s), p);
     notify_move();
     return 1;
+  }
+
+  // The best place for subtree m (out of the tree) by the full search, seeded with `start`.
+  uint32_t search_from(uint32_t m, uint32_t start) {
+    const Box& box = bvh_[m].box;
+    const ReinsertionCandidate seed{start, detail::placement_cost(bvh_, box, start, path_)};
+    return detail::search_reinsertion(bvh_, box, kInvalidNode, kInvalidNode, heap_, seed).node;
   }
 
   // Meister-Bittner style: search every candidate against the current tree on all threads,
@@ -224,8 +230,22 @@ class InsertionOptimizer {
     return {a, b};
   }
 
-  // Refits from `n` up, adding each area change to the tracked sum.
-  void refit_up(uint32_t n) { bvh_.refit_upwards(n, Bvh::RefitScope::until_unchanged, &inner_area_); }
+  // Refits from `n` up, adding each area change to the tracked sum (Bvh::refit_upwards,
+  // saving each node before it changes).
+  void refit_up(uint32_t n) {
+    for (; n != kInvalidNode; n = bvh_[n].parent) {
+      BvhNode& nd = bvh_[n];
+      const Box b = merge(bvh_[nd.left()].box, bvh_[nd.right()].box);
+      if (b == nd.box) return;
+      undo_.save(bvh_, n);
+      const float old_area = nd.area;
+      nd.set_box(b);
+      inner_area_ += static_cast<double>(nd.area) - old_area;
+    }
+  }
+  void save(uint32_t n) {
+    if (n != kInvalidNode) undo_.save(bvh_, n);
+  }
 
   // Figure 3: N and its parent P leave the tree, N's sibling takes P's place.
   void remove(uint32_t n) { detach(n, bvh_[n].area); }
@@ -233,6 +253,7 @@ class InsertionOptimizer {
   // Figure 5: `free_node` becomes the parent of X and L, in X's old place.
   void insert(uint32_t l, uint32_t x, uint32_t free_node) {
     const uint32_t q = bvh_[x].parent;
+    for (uint32_t v : {free_node, q, x, l}) save(v);
     BvhNode& f = bvh_[free_node];
     f.make_inner(x, l);
     f.parent = q;
@@ -279,6 +300,7 @@ class InsertionOptimizer {
     const uint32_t p = bvh_[m].parent;
     const uint32_t s = bvh_.sibling(m);
     const uint32_t g = bvh_[p].parent;
+    for (uint32_t v : {m, p, s, g}) save(v);
     inner_area_ -= also_removed + bvh_[p].area;
     if (g == kInvalidNode) {
       bvh_.root = s;
@@ -348,11 +370,13 @@ class InsertionOptimizer {
   double leaf_term_ = 0.0;
   double root_area_ = 0.0;
   std::vector<detail::SearchEntry> heap_;
+  std::vector<uint32_t> path_;
   std::vector<uint32_t> inner_;
   std::vector<uint64_t> keys_;
   std::vector<Plan> plans_;
   std::vector<uint32_t> touched_;
   uint32_t stamp_ = 0;
+  detail::UndoLog undo_;
 
   double leaf_cost(float area, uint32_t count) const { return config_.cost.intersection * area * count; }
 };
