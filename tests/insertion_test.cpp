@@ -175,20 +175,21 @@ TEST(UndoLog, RestoresTheExactTree) {
 }
 
 // The sequential form oscillates near its end and must leave the lowest-cost tree of all its
-// passes, which it now gets back through the undo log: the final tree must be, node for
-// node, the tree seen at the end of the best pass.
+// passes, which it gets back through the undo log: the final tree must be, node for node,
+// the tree seen at the end of the best pass. (When the log fills up mid-pass below the best
+// cost, that better tree becomes the restore point: then the final cost is lower still.)
 TEST(InsertionOptimizer, SequentialEndsOnTheBestPassTree) {
-  int restored = 0;
-  for (uint64_t seed = 0; seed < 6; ++seed) {
+  int restored = 0, exact = 0;
+  for (uint64_t seed = 0; seed < 16; ++seed) {
     PrimitiveRefs refs = testing::random_refs(600, 70 + seed);
     Bvh bvh = build_object_median(refs);
     InsertionConfig cfg;
     cfg.form = InsertionForm::sequential;
     cfg.seed = seed;
-    cfg.batch = 0.2;
+    cfg.batch = seed % 4 == 3 ? 0.2 : 0.01;
     cfg.random_after = 1;
     cfg.stop_after = 8;
-    cfg.limits.max_passes = 60;
+    cfg.limits.max_passes = 80;
     Bvh last_move;
     Bvh best_tree = bvh;
     double best = sah_cost(bvh, cfg.cost), last_pass = best;
@@ -202,13 +203,17 @@ TEST(InsertionOptimizer, SequentialEndsOnTheBestPassTree) {
     OptimizeReport r = testing::optimize_insertion_observed(bvh, cfg, [&](const Bvh& t, double) { last_move = t; });
     restored += last_pass > best;
     ASSERT_TRUE(validate(bvh, refs).ok());
-    EXPECT_EQ(r.final_cost, best) << seed;
-    best_tree.renumber_depth_first();
-    EXPECT_EQ(testing::tree_signature(bvh, refs), testing::tree_signature(best_tree, refs)) << seed;
-    EXPECT_NEAR(sah_cost(bvh, cfg.cost), best, 1e-9 * best);
+    EXPECT_LE(r.final_cost, best) << seed;
+    EXPECT_NEAR(sah_cost(bvh, cfg.cost), r.final_cost, 1e-9 * best);
+    if (r.final_cost == best) {
+      ++exact;
+      best_tree.renumber_depth_first();
+      EXPECT_EQ(testing::tree_signature(bvh, refs), testing::tree_signature(best_tree, refs)) << seed;
+    }
   }
-  // The runs ended above their best, so the restore was exercised.
-  EXPECT_GT(restored, 2);
+  // Runs ended above their best, so the restore was exercised, mostly onto the best pass's tree.
+  EXPECT_GE(restored, 4) << exact;
+  EXPECT_GE(exact, 8) << restored;
 }
 
 // Brute force on a hand-made tree: the best place is the leaf the new box overlaps.

@@ -9,27 +9,23 @@
 #include <vector>
 
 #include "bvhopt/bvh.h"
+#include "optimize/node_set.h"
 
 namespace bvhopt::detail {
 
 class UndoLog {
  public:
-  // The tree as it is now becomes the restore point.
+  // The tree as it is now becomes the restore point. `tracked_sum` is given back with it.
   void begin(const Bvh& bvh, double tracked_sum) {
-    clear_marks();
-    if (saved_.size() != (bvh.nodes.size() + 63) / 64) saved_.assign((bvh.nodes.size() + 63) / 64, 0);
+    saved_.reset(bvh.nodes.size());
+    entries_.clear();
     root_ = bvh.root;
     tracked_sum_ = tracked_sum;
     active_ = true;
   }
   // Call before changing node n in any way.
   void save(const Bvh& bvh, uint32_t n) {
-    if (!active_) return;
-    uint64_t& word = saved_[n >> 6];
-    const uint64_t bit = uint64_t{1} << (n & 63);
-    if (word & bit) return;
-    word |= bit;
-    entries_.push_back({n, bvh[n]});
+    if (active_ && saved_.insert(n)) entries_.push_back({n, bvh[n]});
   }
   // Puts back every saved record (each node was saved once, with its restore-point record),
   // the root and the tracked sum; the restore point stays.
@@ -37,19 +33,18 @@ class UndoLog {
     for (const auto& [n, record] : entries_) bvh[n] = record;
     bvh.root = root_;
     tracked_sum = tracked_sum_;
-    clear_marks();
-  }
-  size_t size() const { return entries_.size(); }
-  bool active() const { return active_; }
-
- private:
-  void clear_marks() {
-    for (const auto& e : entries_) saved_[e.first >> 6] &= ~(uint64_t{1} << (e.first & 63));
+    saved_.clear();
     entries_.clear();
   }
+  size_t size() const { return entries_.size(); }
+  double restore_point_sum() const { return tracked_sum_; }
+  // Room for `entries` records, reserved once so that the log's memory is known.
+  void reserve(size_t entries) { entries_.reserve(entries); }
+  size_t capacity() const { return entries_.capacity(); }
 
+ private:
   std::vector<std::pair<uint32_t, BvhNode>> entries_;
-  std::vector<uint64_t> saved_;  // one bit per node: its record is in entries_
+  NodeSet saved_;
   uint32_t root_ = kInvalidNode;
   double tracked_sum_ = 0.0;
   bool active_ = false;
