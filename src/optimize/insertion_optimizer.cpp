@@ -464,8 +464,9 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
   // nodes; the refit makes every box exactly the union of its children, which undoing a
   // parallel move relies on.
   bvh.renumber_depth_first();
-  for (uint32_t n : bvh.post_order())
-    if (!bvh[n].is_leaf()) bvh.refit_node(n);
+  // Depth-first numbers put every child after its parent: refit from the last node back.
+  for (size_t i = bvh.nodes.size(); i-- > 0;)
+    if (!bvh.nodes[i].is_leaf()) bvh.refit_node(static_cast<uint32_t>(i));
   {
     InsertionOptimizer probe(bvh, config, false, after_move);
     driver.set_initial_cost(probe.cost());
