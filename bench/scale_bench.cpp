@@ -132,14 +132,6 @@ Options parse(int argc, char** argv) {
   return opt;
 }
 
-// The lowest cost of the run by `seconds` into it (what a budget of that length keeps).
-double best_within(const OptimizeReport& rep, double seconds) {
-  double cost = rep.initial_cost;
-  for (const PassRecord& p : rep.trace)
-    if (p.seconds <= seconds) cost = p.best_cost;
-  return cost;
-}
-
 double share_of_gain(double start, double reached, double converged) {
   return start > converged ? 100.0 * (start - reached) / (start - converged) : 100.0;
 }
@@ -181,8 +173,8 @@ Row run_scene(const std::string& spec, const Options& opt) {
   std::fprintf(stderr, "\n");
   row.optimize_bytes_per_tri = static_cast<double>(g_peak.load() - mesh_bytes) / tris;
   row.rss_bytes_per_tri = static_cast<double>(peak_rss()) / tris;
-  row.cost_1x = best_within(rep, row.build_s);
-  row.cost_5x = best_within(rep, 5.0 * row.build_s);
+  row.cost_1x = cost_within(rep, row.build_s, true);
+  row.cost_5x = cost_within(rep, 5.0 * row.build_s, true);
   row.converged = rep.final_cost;
   row.converged_s = rep.seconds;
   row.passes = rep.passes;
