@@ -2,6 +2,10 @@
 // to convergence, on the built-in hall at 1M and 4M triangles and on Conference, 2 threads.
 //
 //   scale_bench [--scene SPEC]... [--threads 2] [--json FILE] [--reference SPEC=COST]...
+//               [--budget N]
+//
+// --budget N stops each optimizer run at N build times (then "converged" is only where the
+// run stopped, marked so); without it every run goes to convergence.
 //
 // Per scene: the build's time; the best cost reached within 1x and 5x the build time (read
 // from the converged run's trace, which is what a --time-budget run of that length keeps) and
@@ -104,6 +108,7 @@ struct Options {
   int threads = 2;
   std::string json_path;
   std::map<std::string, double> references;  // scene spec -> a given converged cost
+  double budget = 0.0;                          // in build times; 0: to convergence
 };
 
 Options parse(int argc, char** argv) {
@@ -115,6 +120,8 @@ Options parse(int argc, char** argv) {
       opt.scenes.push_back(args.value());
     } else if (a == "--threads") {
       opt.threads = std::max(1, std::atoi(args.value().c_str()));
+    } else if (a == "--budget") {
+      opt.budget = std::atof(args.value().c_str());
     } else if (a == "--json") {
       opt.json_path = args.value();
     } else if (a == "--reference") {
@@ -143,6 +150,7 @@ struct Row {
   uint32_t passes = 0;
   double build_bytes_per_tri = 0, optimize_bytes_per_tri = 0, rss_bytes_per_tri = 0;
   double reference = 0;  // 0: none given
+  bool converged_run = true;
 };
 
 Row run_scene(const std::string& spec, const Options& opt) {
@@ -166,6 +174,7 @@ Row run_scene(const std::string& spec, const Options& opt) {
 
   reset_heap_peak();
   InsertionConfig cfg;
+  cfg.limits.time_limit = opt.budget * row.build_s;
   cfg.limits.on_pass = [&](const PassRecord& p) {
     std::fprintf(stderr, "\r%s: pass %u, %.1f s, best %.4f   ", spec.c_str(), p.pass, p.seconds, p.best_cost);
   };
@@ -178,6 +187,7 @@ Row run_scene(const std::string& spec, const Options& opt) {
   row.converged = rep.final_cost;
   row.converged_s = rep.seconds;
   row.passes = rep.passes;
+  row.converged_run = rep.stop_reason == StopReason::converged;
   if (auto it = opt.references.find(spec); it != opt.references.end()) row.reference = it->second;
   return row;
 }
@@ -189,11 +199,11 @@ void print(const std::vector<Row>& rows, int threads) {
               "converged cost | converged s (x build) | passes | heap B/tri build / optimize | RSS B/tri |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const Row& r : rows) {
-    std::printf("| %s | %llu | %.2f | %.2f | %.2f (%.1f) | %.2f (%.1f, %.2f) | %.2f | %.1f (%.1f) | %u | %.1f / %.1f | %.0f |\n",
+    std::printf("| %s | %llu | %.2f | %.2f | %.2f (%.1f) | %.2f (%.1f, %.2f) | %.2f%s | %.1f (%.1f) | %u | %.1f / %.1f | %.0f |\n",
                 r.spec.c_str(), static_cast<unsigned long long>(r.triangles), r.build_s, r.sweep_cost, r.cost_1x,
                 share_of_gain(r.sweep_cost, r.cost_1x, r.converged), r.cost_5x,
                 share_of_gain(r.sweep_cost, r.cost_5x, r.converged), 100.0 * (r.cost_5x / r.converged - 1.0), r.converged,
-                r.converged_s, r.converged_s / r.build_s, r.passes, r.build_bytes_per_tri, r.optimize_bytes_per_tri,
+                r.converged_run ? "" : " (stopped at the budget)", r.converged_s, r.converged_s / r.build_s, r.passes, r.build_bytes_per_tri, r.optimize_bytes_per_tri,
                 r.rss_bytes_per_tri);
     if (r.reference > 0)
       std::printf("|   vs given converged %.2f | | | | %.1f %% | %.1f %% | | | | | |\n", r.reference,
@@ -230,7 +240,14 @@ int main(int argc, char** argv) {
   return guarded_main("scale_bench", [&] {
     ThreadLimit limit(opt.threads);
     std::vector<Row> rows;
-    for (const std::string& spec : opt.scenes) rows.push_back(run_scene(spec, opt));
+    for (const std::string& spec : opt.scenes) {
+      rows.push_back(run_scene(spec, opt));
+      // Each scene's figures as soon as they are known: the large runs take long.
+      const Row& r = rows.back();
+      std::fprintf(stderr, "%s: build %.2f s, sweep %.4f, 1x %.4f, 5x %.4f, end %.4f after %.1f s (%s), heap %.1f B/tri\n",
+                   r.spec.c_str(), r.build_s, r.sweep_cost, r.cost_1x, r.cost_5x, r.converged, r.converged_s,
+                   r.converged_run ? "converged" : "budget", r.optimize_bytes_per_tri);
+    }
     print(rows, opt.threads);
     if (!opt.json_path.empty()) {
       nlohmann::json j = nlohmann::json::array();
