@@ -24,6 +24,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bvhopt/error.h"
+#include "bvhopt/optimize_report.h"
 
 namespace bvhopt::bench {
 
@@ -184,6 +185,17 @@ class ThreadLimit {
  private:
   tbb::global_control control_;
 };
+
+// ---- optimizer traces ----
+
+// The cost after the last pass that ended within `seconds` into the run (the initial cost if
+// none did); with `best`, the lowest cost by then (what a time budget of that length keeps).
+inline double cost_within(const OptimizeReport& rep, double seconds, bool best = false) {
+  double cost = rep.initial_cost;
+  for (const PassRecord& p : rep.trace)
+    if (p.seconds <= seconds) cost = best ? p.best_cost : p.cost;
+  return cost;
+}
 
 // ---- output ----
 

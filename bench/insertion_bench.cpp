@@ -94,13 +94,6 @@ OptRun run_optimizer(const Bvh& start, const PrimitiveRefs& refs, InsertionConfi
   return out;
 }
 
-// The cost after the last pass that ended within `seconds` (the initial cost if none did).
-double cost_within(const OptimizeReport& rep, double seconds) {
-  double cost = rep.initial_cost;
-  for (const PassRecord& p : rep.trace)
-    if (p.seconds <= seconds) cost = p.cost;
-  return cost;
-}
 
 // Seconds into the run at which the trace first reaches `target`; negative if never.
 double time_to_reach(const OptimizeReport& rep, double target) {

@@ -88,6 +88,9 @@ BakeResult bake(const BakeOptions& opt) {
     gain.add(p.best_cost);
     progress.update("optimizing: " + progress_text(p, gain, false));
   };
+  // The optimizer needs only the tree: the references (40 bytes a triangle) are dropped while
+  // it runs and made again, the same, for the file.
+  refs = PrimitiveRefs{};
   r.report = optimize_insertion(bvh, insertion);
   r.optimize_seconds = r.report.seconds;
   r.cost_optimized = r.report.final_cost;
@@ -109,6 +112,7 @@ BakeResult bake(const BakeOptions& opt) {
   info.scene_triangles = r.triangles;
   info.method = "sweep+insertion+collapse";
   progress.update("writing " + opt.output, true);
+  refs = make_references(mesh);
   write_bvh_file(opt.output, bvh, refs, info);
   progress.finish();
   r.peak_rss = peak_rss_bytes();

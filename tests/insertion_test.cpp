@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
 
@@ -12,6 +13,8 @@
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/validate.h"
+#include "optimize/reinsertion_search.h"
+#include "optimize/undo_log.h"
 #include "test_support.h"
 
 namespace bvhopt {
@@ -112,6 +115,105 @@ TEST(InsertionSearch, AfterRemovalEqualsBruteForceOnTheRemovedTree) {
     ++checked;
   }
   EXPECT_GT(checked, 1900);
+}
+
+// The sequential form's search starts from a given node (the removed node's neighbourhood)
+// with that node's cost as the first bound: it must still find the exhaustive minimum, from
+// any start, and the start's cost must be the cost the search itself would give that node.
+TEST(InsertionSearch, SearchFromAnyStartEqualsBruteForce) {
+  std::mt19937_64 rng(4242);
+  std::vector<detail::SearchEntry> heap;
+  std::vector<uint32_t> path;
+  int start_kept = 0;
+  for (uint32_t trial = 0; trial < 3000; ++trial) {
+    const uint32_t count = 2 + static_cast<uint32_t>(rng() % 150);
+    PrimitiveRefs refs = testing::random_refs(count, 50000 + trial);
+    Bvh bvh = build_start(refs, static_cast<int>(trial));
+    Box box = testing::random_refs(1, 90000 + trial).boxes[0];
+    if (trial % 5 == 0) box = Box(box.min * 0.5f - Vec3(5.0f), box.max * 1.5f);
+    const std::vector<uint32_t> all = bvh.depth_first_order();
+    const uint32_t start = all[rng() % all.size()];
+    const ReinsertionCandidate seed{start, detail::placement_cost(bvh, box, start, path)};
+    const ReinsertionCandidate fast = detail::search_reinsertion(bvh, box, kInvalidNode, kInvalidNode, heap, seed);
+    const ReinsertionCandidate slow = testing::find_reinsertion_brute_force(bvh, box);
+    ASSERT_EQ(fast.cost, slow.cost) << "trial " << trial;
+    ASSERT_EQ(detail::placement_cost(bvh, box, fast.node, path), fast.cost) << "trial " << trial;
+    start_kept += fast.node == start;
+  }
+  // Starts that are already the best place happen, and are kept.
+  EXPECT_GT(start_kept, 10);
+}
+
+// The undo log gives back exactly the tree of its restore point, whatever was changed after.
+TEST(UndoLog, RestoresTheExactTree) {
+  std::mt19937_64 rng(31);
+  detail::UndoLog log;
+  PrimitiveRefs refs = testing::random_refs(400, 5);
+  Bvh bvh = build_sweep_sah(refs);
+  for (int round = 0; round < 20; ++round) {
+    const Bvh before = bvh;
+    double sum = 1.5 * round;
+    log.begin(bvh, sum);
+    for (int change = 0; change < 1 + round * 10; ++change) {
+      const uint32_t n = static_cast<uint32_t>(rng() % bvh.nodes.size());
+      log.save(bvh, n);
+      bvh[n].parent = static_cast<uint32_t>(rng());
+      bvh[n].set_box(Box(Vec3(0.0f), Vec3(static_cast<float>(rng() % 100))));
+    }
+    bvh.root = static_cast<uint32_t>(rng() % bvh.nodes.size());
+    sum = -1.0;
+    log.restore(bvh, sum);
+    ASSERT_EQ(sum, 1.5 * round);
+    ASSERT_EQ(bvh.root, before.root);
+    ASSERT_EQ(0, std::memcmp(bvh.nodes.data(), before.nodes.data(), bvh.nodes.size() * sizeof(BvhNode))) << round;
+    // A node changed again after a restore is saved again (the marks were cleared).
+    log.save(bvh, 0);
+    EXPECT_EQ(log.size(), 1u);
+    log.begin(bvh, sum);
+    EXPECT_EQ(log.size(), 0u);
+  }
+}
+
+// The sequential form oscillates near its end and must leave the lowest-cost tree of all its
+// passes, which it gets back through the undo log: the final tree must be, node for node,
+// the tree seen at the end of the best pass. (When the log fills up mid-pass below the best
+// cost, that better tree becomes the restore point: then the final cost is lower still.)
+TEST(InsertionOptimizer, SequentialEndsOnTheBestPassTree) {
+  int restored = 0, exact = 0;
+  for (uint64_t seed = 0; seed < 16; ++seed) {
+    PrimitiveRefs refs = testing::random_refs(600, 70 + seed);
+    Bvh bvh = build_object_median(refs);
+    InsertionConfig cfg;
+    cfg.form = InsertionForm::sequential;
+    cfg.seed = seed;
+    cfg.batch = seed % 4 == 3 ? 0.2 : 0.01;
+    cfg.random_after = 1;
+    cfg.stop_after = 8;
+    cfg.limits.max_passes = 80;
+    Bvh last_move;
+    Bvh best_tree = bvh;
+    double best = sah_cost(bvh, cfg.cost), last_pass = best;
+    cfg.limits.on_pass = [&](const PassRecord& p) {
+      last_pass = p.cost;
+      if (p.cost < best) {
+        best = p.cost;
+        best_tree = last_move;
+      }
+    };
+    OptimizeReport r = testing::optimize_insertion_observed(bvh, cfg, [&](const Bvh& t, double) { last_move = t; });
+    restored += last_pass > best;
+    ASSERT_TRUE(validate(bvh, refs).ok());
+    EXPECT_LE(r.final_cost, best) << seed;
+    EXPECT_NEAR(sah_cost(bvh, cfg.cost), r.final_cost, 1e-9 * best);
+    if (r.final_cost == best) {
+      ++exact;
+      best_tree.renumber_depth_first();
+      EXPECT_EQ(testing::tree_signature(bvh, refs), testing::tree_signature(best_tree, refs)) << seed;
+    }
+  }
+  // Runs ended above their best, so the restore was exercised, mostly onto the best pass's tree.
+  EXPECT_GE(restored, 4) << exact;
+  EXPECT_GE(exact, 8) << restored;
 }
 
 // Brute force on a hand-made tree: the best place is the leaf the new box overlaps.

@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <string>
 
@@ -8,6 +10,7 @@
 #include "bvhopt/validate.h"
 #include "bvhopt/leaf_dedup.h"
 #include "bvhopt/median_builder.h"
+#include "bvhopt/sweep_sah_builder.h"
 #include "test_support.h"
 
 namespace bvhopt {
@@ -315,6 +318,57 @@ TEST(ValidateOptions, DroppedDuplicatesAcceptedOnlyWhereTheTriangleRemains) {
   ValidationReport r = validate(broken, refs, ValidationOptions{.allow_dropped_duplicates = true});
   EXPECT_FALSE(r.ok());
   EXPECT_NE(r.summary().find("triangle 9"), std::string::npos) << r.summary();
+}
+
+}  // namespace
+}  // namespace bvhopt
+
+namespace bvhopt {
+namespace {
+
+// renumber_depth_first works in place (cycles of swaps); it must give exactly what the plain
+// copy in depth-first order gives, also with unreachable nodes to drop.
+TEST(Renumber, InPlaceEqualsACopyInDepthFirstOrder) {
+  for (uint32_t trial = 0; trial < 40; ++trial) {
+    PrimitiveRefs refs = testing::random_refs(50 + trial * 37, 300 + trial);
+    Bvh bvh = build_sweep_sah(refs);
+    // Shuffle the numbering and leave a few unreachable nodes (a detached subtree's parent).
+    std::mt19937 rng(trial);
+    std::vector<uint32_t> perm(bvh.nodes.size());
+    for (uint32_t i = 0; i < perm.size(); ++i) perm[i] = i;
+    std::shuffle(perm.begin(), perm.end(), rng);
+    Bvh shuffled = bvh;
+    for (uint32_t i = 0; i < perm.size(); ++i) {
+      BvhNode nd = bvh.nodes[i];
+      if (nd.parent != kInvalidNode) nd.parent = perm[nd.parent];
+      if (!nd.is_leaf()) nd.make_inner(perm[nd.left()], perm[nd.right()]);
+      shuffled.nodes[perm[i]] = nd;
+    }
+    shuffled.root = perm[bvh.root];
+    if (trial % 2 == 1) shuffled.nodes.push_back(BvhNode{});  // unreachable
+    Bvh expected;
+    std::vector<uint32_t> order = shuffled.depth_first_order();
+    std::vector<uint32_t> index(shuffled.nodes.size(), kInvalidNode);
+    for (uint32_t i = 0; i < order.size(); ++i) index[order[i]] = i;
+    for (uint32_t n : order) {
+      BvhNode nd = shuffled.nodes[n];
+      if (nd.parent != kInvalidNode) nd.parent = index[nd.parent];
+      if (nd.is_leaf()) {
+        const uint32_t first = static_cast<uint32_t>(expected.ref_indices.size());
+        for (uint32_t k = 0; k < nd.ref_count(); ++k) expected.ref_indices.push_back(shuffled.ref_indices[nd.first_ref() + k]);
+        nd.make_leaf(first, nd.ref_count());
+      } else {
+        nd.make_inner(index[nd.left()], index[nd.right()]);
+      }
+      expected.nodes.push_back(nd);
+    }
+    shuffled.renumber_depth_first();
+    ASSERT_EQ(shuffled.root, 0u);
+    ASSERT_EQ(shuffled.nodes.size(), expected.nodes.size());
+    ASSERT_EQ(0, std::memcmp(shuffled.nodes.data(), expected.nodes.data(), expected.nodes.size() * sizeof(BvhNode)));
+    ASSERT_EQ(shuffled.ref_indices, expected.ref_indices);
+    ASSERT_TRUE(validate(shuffled, refs).ok());
+  }
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 #include "bvhopt/insertion_optimizer.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -15,6 +16,8 @@
 #include "optimize/find_by_name.h"
 #include "optimize/pass_driver.h"
 #include "optimize/reinsertion_search.h"
+#include "optimize/node_set.h"
+#include "optimize/undo_log.h"
 
 namespace bvhopt {
 
@@ -96,17 +99,15 @@ class InsertionOptimizer {
   // The sequential form can raise the cost (both children are out at once) and oscillates
   // near the end, so it keeps the best tree it has seen. The parallel form never raises it.
   bool keep_best_before(uint32_t /*pass*/) const { return !parallel_; }
-  struct Snapshot {
-    std::vector<BvhNode> nodes;
-    uint32_t root;
-    double inner_area;
-  };
-  Snapshot snapshot() const { return {bvh_.nodes, bvh_.root, inner_area_}; }
-  void restore(Snapshot s) {
-    bvh_.nodes = std::move(s.nodes);
-    bvh_.root = s.root;
-    inner_area_ = s.inner_area;
+  // The best tree is kept as an undo log from it, not a copy: only one restore point is
+  // ever live (the driver takes the next only after dropping the last), so the token is empty.
+  struct Snapshot {};
+  Snapshot snapshot() {
+    if (undo_.capacity() == 0) undo_.reserve(undo_limit() + kUndoSlack);
+    undo_.begin(bvh_, inner_area_);
+    return {};
   }
+  void restore(Snapshot) { undo_.restore(bvh_, inner_area_); }
 
   detail::PassResult run_pass(uint32_t pass, double stage_best) {
     // Once the measure has stalled, selection stays random (section 2.5): going back to the
@@ -117,7 +118,10 @@ class InsertionOptimizer {
     if (parallel_) {
       moves = pass_parallel(candidates_);
     } else {
-      for (uint32_t n : candidates_) moves += update_sequential(n);
+      for (uint32_t n : candidates_) {
+        moves += update_sequential(n);
+        if (undo_.size() >= undo_limit() && !stay_within_log()) break;
+      }
     }
     const double c = cost();
     // A relative margin, so that rounding noise in an oscillating tail or the endless tiny
@@ -131,33 +135,49 @@ class InsertionOptimizer {
 
  private:
 
+  // The undo log holds at most one record per sixteenth of the nodes (2.75 bytes a node,
+  // where a copy of the tree took 40; it keeps the optimizer under 100 bytes a triangle): a
+  // pass changes about 3 % of them, a stretch of passes without a new best up to a quarter.
+  // One move adds at most twice the tree's depth, the slack reserved beyond the limit.
+  size_t undo_limit() const { return std::max<size_t>(bvh_.nodes.size() / 16, 64); }
+  static constexpr size_t kUndoSlack = 1024;
+
+  // The log is full. If the tree now costs less than the restore point, it becomes the
+  // restore point (a better tree than the driver's best: kept). Otherwise the tree goes back
+  // to the restore point and the pass ends there: the next pass starts again from the best
+  // tree, with other candidates.
+  bool stay_within_log() {
+    if (inner_area_ < undo_.restore_point_sum()) {
+      undo_.begin(bvh_, inner_area_);
+      return true;
+    }
+    undo_.restore(bvh_, inner_area_);
+    notify_move();
+    return false;
+  }
+
   // Candidates of one pass: the k inner non-root nodes with the largest measure, largest
   // first, or k random ones.
   void select(uint32_t pass, bool random, std::vector<uint32_t>& out) {
     out.clear();
     // Moves reuse the freed nodes as inner nodes, so the set of inner node ids never
     // changes; only which of them is the root does (the root is skipped when met).
-    if (inner_.empty())
-      for (uint32_t i = 0; i < bvh_.nodes.size(); ++i)
-        if (!bvh_[i].is_leaf()) inner_.push_back(i);
-    if (inner_.empty()) return;
-    const size_t k = std::clamp<size_t>(static_cast<size_t>(std::ceil(config_.batch * inner_.size())), 1, inner_.size());
+    if (inner_count_ == 0)
+      for (const BvhNode& nd : bvh_.nodes) inner_count_ += !nd.is_leaf();
+    if (inner_count_ == 0) return;
+    const size_t k = std::clamp<size_t>(static_cast<size_t>(std::ceil(config_.batch * inner_count_)), 1, inner_count_);
     if (random) {
+      // Uniform over the inner nodes without a list of them: draws that hit a leaf are redrawn.
       RandomStream rng{config_.seed * kGoldenGamma + pass};
-      for (size_t i = 0; i < k; ++i) out.push_back(inner_[rng.below(static_cast<uint32_t>(inner_.size()))]);
+      const uint32_t count = static_cast<uint32_t>(bvh_.nodes.size());
+      for (size_t i = 0; i < k; ++i) {
+        uint32_t n = rng.below(count);
+        while (bvh_[n].is_leaf()) n = rng.below(count);
+        out.push_back(n);
+      }
       return;
     }
-    // One 64-bit key per node: the measure's float bits (non-negative floats order as their
-    // bits do) above the complemented index, so ties go to the lower index and the order
-    // never depends on the selection algorithm.
-    keys_.resize(inner_.size());
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, inner_.size(), 8192), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        const uint32_t n = inner_[i];
-        const float m = n == bvh_.root ? 0.0f : static_cast<float>(measure(n));
-        keys_[i] = (static_cast<uint64_t>(std::bit_cast<uint32_t>(m)) << 32) | (0xffffffffu - n);
-      }
-    });
+    collect_largest_keys(k);
     std::nth_element(keys_.begin(), keys_.begin() + (k - 1), keys_.end(), std::greater<uint64_t>());
     std::sort(keys_.begin(), keys_.begin() + k, std::greater<uint64_t>());
     for (size_t i = 0; i < k; ++i) {
@@ -166,19 +186,70 @@ class InsertionOptimizer {
     }
   }
 
+  // One 64-bit key per inner node: the measure's float bits (non-negative floats order as
+  // their bits do) above the complemented index, so ties go to the lower index and the
+  // order never depends on the selection algorithm.
+  uint64_t key(uint32_t n) const {
+    const float m = n == bvh_.root ? 0.0f : static_cast<float>(measure(n));
+    return (static_cast<uint64_t>(std::bit_cast<uint32_t>(m)) << 32) | (0xffffffffu - n);
+  }
+
+  // Leaves in keys_ the keys of (at least) the k largest: a histogram of the keys' top 16
+  // bits finds the bucket that holds the k-th, and only keys from that bucket up are kept,
+  // so the scratch is about k keys, not one per node (8 bytes a node on a huge tree).
+  void collect_largest_keys(size_t k) {
+    constexpr size_t kBuckets = size_t{1} << 16;
+    const size_t count = bvh_.nodes.size();
+    auto bucket = [](uint64_t key) { return static_cast<size_t>(key >> 48); };
+    tbb::combinable<std::vector<uint32_t>> local([] { return std::vector<uint32_t>(kBuckets, 0); });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 16384), [&](const tbb::blocked_range<size_t>& r) {
+      std::vector<uint32_t>& h = local.local();
+      for (size_t i = r.begin(); i < r.end(); ++i)
+        if (!bvh_.nodes[i].is_leaf()) ++h[bucket(key(static_cast<uint32_t>(i)))];
+    });
+    std::vector<uint64_t> histogram(kBuckets, 0);
+    local.combine_each([&](const std::vector<uint32_t>& h) {
+      for (size_t b = 0; b < kBuckets; ++b) histogram[b] += h[b];
+    });
+    size_t first = kBuckets, above = 0;
+    while (first > 0 && above < k) above += histogram[--first];
+    // Integer counts: the same threshold on any thread count; the kept set is then sorted by
+    // key, so the order it was gathered in does not matter.
+    tbb::combinable<std::vector<uint64_t>> kept;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 16384), [&](const tbb::blocked_range<size_t>& r) {
+      std::vector<uint64_t>& out = kept.local();
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        if (bvh_.nodes[i].is_leaf()) continue;
+        const uint64_t kk = key(static_cast<uint32_t>(i));
+        if (bucket(kk) >= first) out.push_back(kk);
+      }
+    });
+    keys_.clear();
+    keys_.reserve(above);
+    kept.combine_each([&](const std::vector<uint64_t>& part) { keys_.insert(keys_.end(), part.begin(), part.end()); });
+  }
+
   // The paper's step 2 for one node: remove N and its parent, reinsert both children
   // (larger first) at the best places in the tree as it is after the removal.
   uint64_t update_sequential(uint32_t n) {
     if (n == bvh_.root || bvh_[n].is_leaf()) return 0;
     auto [a, b] = ordered_children(n);
     const uint32_t p = bvh_[n].parent;
+    const uint32_t s = bvh_.sibling(n);
     remove(n);
-    ReinsertionCandidate ca = detail::search_reinsertion(bvh_, bvh_[a].box, kInvalidNode, kInvalidNode, heap_);
-    insert(a, ca.node, n);
-    ReinsertionCandidate cb = detail::search_reinsertion(bvh_, bvh_[b].box, kInvalidNode, kInvalidNode, heap_);
-    insert(b, cb.node, p);
+    // Both searches start from N's sibling, which took P's place: the children's old
+    // neighbourhood, usually close to their best place, so the bound prunes from the start.
+    insert(a, search_from(a, s), n);
+    insert(b, search_from(b, s), p);
     notify_move();
     return 1;
+  }
+
+  // The best place for subtree m (out of the tree) by the full search, seeded with `start`.
+  uint32_t search_from(uint32_t m, uint32_t start) {
+    const Box& box = bvh_[m].box;
+    const ReinsertionCandidate seed{start, detail::placement_cost(bvh_, box, start, path_)};
+    return detail::search_reinsertion(bvh_, box, kInvalidNode, kInvalidNode, heap_, seed).node;
   }
 
   // Meister-Bittner style: search every candidate against the current tree on all threads,
@@ -190,8 +261,7 @@ class InsertionOptimizer {
       std::vector<std::pair<uint32_t, Box>> path;
       for (size_t i = r.begin(); i < r.end(); ++i) plans_[i] = plan(candidates[i], heap, path);
     });
-    if (touched_.size() != bvh_.nodes.size()) touched_.assign(bvh_.nodes.size(), 0);
-    ++stamp_;
+    touched_.reset(bvh_.nodes.size());
     uint64_t moves = 0;
     for (const Plan& pl : plans_)
       if (pl.moved != kInvalidNode) moves += apply(pl);
@@ -224,8 +294,22 @@ class InsertionOptimizer {
     return {a, b};
   }
 
-  // Refits from `n` up, adding each area change to the tracked sum.
-  void refit_up(uint32_t n) { bvh_.refit_upwards(n, Bvh::RefitScope::until_unchanged, &inner_area_); }
+  // Refits from `n` up, adding each area change to the tracked sum (Bvh::refit_upwards,
+  // saving each node before it changes).
+  void refit_up(uint32_t n) {
+    for (; n != kInvalidNode; n = bvh_[n].parent) {
+      BvhNode& nd = bvh_[n];
+      const Box b = merge(bvh_[nd.left()].box, bvh_[nd.right()].box);
+      if (b == nd.box) return;
+      undo_.save(bvh_, n);
+      const float old_area = nd.area;
+      nd.set_box(b);
+      inner_area_ += static_cast<double>(nd.area) - old_area;
+    }
+  }
+  void save(uint32_t n) {
+    if (n != kInvalidNode) undo_.save(bvh_, n);
+  }
 
   // Figure 3: N and its parent P leave the tree, N's sibling takes P's place.
   void remove(uint32_t n) { detach(n, bvh_[n].area); }
@@ -233,6 +317,7 @@ class InsertionOptimizer {
   // Figure 5: `free_node` becomes the parent of X and L, in X's old place.
   void insert(uint32_t l, uint32_t x, uint32_t free_node) {
     const uint32_t q = bvh_[x].parent;
+    for (uint32_t v : {free_node, q, x, l}) save(v);
     BvhNode& f = bvh_[free_node];
     f.make_inner(x, l);
     f.parent = q;
@@ -265,7 +350,7 @@ class InsertionOptimizer {
     return best;
   }
 
-  bool is_touched(uint32_t n) const { return n != kInvalidNode && touched_[n] == stamp_; }
+  bool is_touched(uint32_t n) const { return n != kInvalidNode && touched_.contains(n); }
   bool inside(uint32_t x, uint32_t subtree_root) const {
     for (; x != kInvalidNode; x = bvh_[x].parent)
       if (x == subtree_root) return true;
@@ -279,6 +364,7 @@ class InsertionOptimizer {
     const uint32_t p = bvh_[m].parent;
     const uint32_t s = bvh_.sibling(m);
     const uint32_t g = bvh_[p].parent;
+    for (uint32_t v : {m, p, s, g}) save(v);
     inner_area_ -= also_removed + bvh_[p].area;
     if (g == kInvalidNode) {
       bvh_.root = s;
@@ -332,7 +418,7 @@ class InsertionOptimizer {
       return 0;
     }
     for (uint32_t v : involved)
-      if (v != kInvalidNode) touched_[v] = stamp_;
+      if (v != kInvalidNode) touched_.insert(v);
     notify_move();
     return 1;
   }
@@ -348,11 +434,12 @@ class InsertionOptimizer {
   double leaf_term_ = 0.0;
   double root_area_ = 0.0;
   std::vector<detail::SearchEntry> heap_;
-  std::vector<uint32_t> inner_;
+  std::vector<uint32_t> path_;
+  size_t inner_count_ = 0;
   std::vector<uint64_t> keys_;
   std::vector<Plan> plans_;
-  std::vector<uint32_t> touched_;
-  uint32_t stamp_ = 0;
+  detail::NodeSet touched_;  // nodes a move of this parallel pass changed
+  detail::UndoLog undo_;
 
   double leaf_cost(float area, uint32_t count) const { return config_.cost.intersection * area * count; }
 };
@@ -377,8 +464,9 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
   // nodes; the refit makes every box exactly the union of its children, which undoing a
   // parallel move relies on.
   bvh.renumber_depth_first();
-  for (uint32_t n : bvh.post_order())
-    if (!bvh[n].is_leaf()) bvh.refit_node(n);
+  // Depth-first numbers put every child after its parent: refit from the last node back.
+  for (size_t i = bvh.nodes.size(); i-- > 0;)
+    if (!bvh.nodes[i].is_leaf()) bvh.refit_node(static_cast<uint32_t>(i));
   {
     InsertionOptimizer probe(bvh, config, false, after_move);
     driver.set_initial_cost(probe.cost());

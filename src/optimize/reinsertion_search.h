@@ -17,12 +17,31 @@ struct SearchEntry {
   uint32_t node;
 };
 
+// The cost of placing `box` above node x, computed exactly as the searches compute it (the
+// induced cost summed from the root down, each term a growth), so that it compares to their
+// totals to the last bit. `path` is scratch.
+inline double placement_cost(const Bvh& bvh, const Box& box, uint32_t x, std::vector<uint32_t>& path) {
+  path.clear();
+  for (uint32_t a = bvh[x].parent; a != kInvalidNode; a = bvh[a].parent) path.push_back(a);
+  double induced = 0.0;
+  for (size_t i = path.size(); i-- > 0;) {
+    const BvhNode& a = bvh[path[i]];
+    induced = induced + (merge(a.box, box).area() - static_cast<double>(a.area));
+  }
+  return induced + merge(bvh[x].box, box).area();
+}
+
 // A min-heap on the induced cost; `heap` is scratch space reused between searches so a hot
-// loop allocates nothing.
+// loop allocates nothing. `start`, if given, is a place near where the subtree was (the
+// first candidate, not restricted by skip or pass_through): its cost bounds the search from
+// the first step, so far fewer nodes are queued; the minimum found is the same (on a tie
+// the start is kept).
 inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, uint32_t skip, uint32_t pass_through,
-                                               std::vector<SearchEntry>& heap) {
+                                               std::vector<SearchEntry>& heap,
+                                               ReinsertionCandidate start = {kInvalidNode, 0.0}) {
   ReinsertionCandidate best{kInvalidNode, std::numeric_limits<double>::infinity()};
   if (bvh.empty()) return best;
+  if (start.node != kInvalidNode) best = start;
   const double l_area = box.area();
   const BvhNode* nodes = bvh.nodes.data();
   auto later = [](const SearchEntry& a, const SearchEntry& b) { return a.induced > b.induced; };
@@ -34,7 +53,7 @@ inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, u
     const BvhNode& r = nodes[bvh.root];
     if (bvh.root != skip) {
       const double direct = merge(r.box, box).area();
-      if (bvh.root != pass_through) best = {bvh.root, direct};
+      if (bvh.root != pass_through && (start.node == kInvalidNode || direct < best.cost)) best = {bvh.root, direct};
       if (!r.is_leaf()) heap.push_back({direct - static_cast<double>(r.area), bvh.root});
     }
   }
@@ -109,8 +128,17 @@ inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, con
       std::push_heap(heap.begin(), heap.end(), later);
     }
   };
-  // Top-down along the path; `path` is bottom-up.
+  // The search starts where the subtree was: S in P's place is evaluated first (and its
+  // subtree queued), so its cost bounds everything after; then the path top-down, each
+  // off-path subtree opened only if its bound beats the best so far. `path` is bottom-up.
+  // Ties keep the first found, so the minimum is the exhaustive search's.
   double induced = 0.0;
+  for (size_t i = path.size(); i-- > 0;) {
+    const Box& shrunk = path[i].second;
+    induced = induced + (merge(shrunk, box).area() - static_cast<double>(shrunk.area()));
+  }
+  consider(s, induced);
+  induced = 0.0;
   for (size_t i = path.size(); i-- > 0;) {
     const uint32_t a = path[i].first;
     const Box& shrunk = path[i].second;
@@ -125,8 +153,6 @@ inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, con
     if (child_induced + l_area < best.cost) consider(off_path, child_induced);
     induced = child_induced;
   }
-  // S in P's place, with the induced cost of P's position.
-  if (induced + l_area < best.cost || best.node == kInvalidNode) consider(s, induced);
 
   while (!heap.empty()) {
     std::pop_heap(heap.begin(), heap.end(), later);

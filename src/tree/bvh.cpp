@@ -59,31 +59,53 @@ std::vector<uint32_t> Bvh::post_order() const {
   return {order.rbegin(), order.rend()};
 }
 
+// In place: the optimizers call it on trees of tens of millions of nodes, where a second
+// node array would double the peak memory. Scratch: one index per node and the new slots.
 void Bvh::renumber_depth_first() {
   if (empty()) {
     nodes.clear();
     return;
   }
-  std::vector<uint32_t> order = depth_first_order();
+  // New numbers in depth_first_order()'s order (left subtree first), and the leaves' slots in
+  // that order, rewritten as the walk meets them.
   std::vector<uint32_t> new_index(nodes.size(), kInvalidNode);
-  for (uint32_t i = 0; i < order.size(); ++i) new_index[order[i]] = i;
-
-  std::vector<BvhNode> new_nodes(order.size());
   std::vector<uint32_t> new_refs;
   new_refs.reserve(ref_indices.size());
-  for (uint32_t i = 0; i < order.size(); ++i) {
-    BvhNode nd = nodes[order[i]];
-    nd.parent = nd.parent == kInvalidNode ? kInvalidNode : new_index[nd.parent];
+  uint32_t next = 0;
+  std::vector<uint32_t> stack{root};
+  while (!stack.empty()) {
+    const uint32_t n = stack.back();
+    stack.pop_back();
+    new_index[n] = next++;
+    BvhNode& nd = nodes[n];
     if (nd.is_leaf()) {
-      uint32_t first = static_cast<uint32_t>(new_refs.size());
+      const uint32_t first = static_cast<uint32_t>(new_refs.size());
       for (uint32_t k = 0; k < nd.ref_count(); ++k) new_refs.push_back(ref_indices[nd.first_ref() + k]);
       nd.make_leaf(first, nd.ref_count());
     } else {
-      nd.make_inner(new_index[nd.left()], new_index[nd.right()]);
+      stack.push_back(nd.right());
+      stack.push_back(nd.left());
     }
-    new_nodes[i] = nd;
   }
-  nodes = std::move(new_nodes);
+  const uint32_t reachable = next;
+  for (uint32_t i = 0; i < nodes.size(); ++i) {
+    if (new_index[i] == kInvalidNode) {
+      new_index[i] = next++;  // unreachable: moved past the end, then dropped
+      continue;
+    }
+    BvhNode& nd = nodes[i];
+    if (nd.parent != kInvalidNode) nd.parent = new_index[nd.parent];
+    if (!nd.is_leaf()) nd.make_inner(new_index[nd.left()], new_index[nd.right()]);
+  }
+  // The permutation applied cycle by cycle: each swap puts one node in its final place.
+  for (uint32_t i = 0; i < nodes.size(); ++i) {
+    while (new_index[i] != i) {
+      const uint32_t j = new_index[i];
+      std::swap(nodes[i], nodes[j]);
+      std::swap(new_index[i], new_index[j]);
+    }
+  }
+  nodes.resize(reachable);
   ref_indices = std::move(new_refs);
   root = 0;
 }

@@ -1,0 +1,272 @@
+// Optimization at scale (issue 13): the sweep SAH build, then insertion (the default form)
+// to convergence, on the built-in hall at 1M and 4M triangles and on Conference, 2 threads.
+//
+//   scale_bench [--scene SPEC]... [--threads 2] [--json FILE] [--reference SPEC=COST]...
+//               [--budget N]
+//
+// --budget N stops each optimizer run at N build times (then "converged" is only where the
+// run stopped, marked so); without it every run goes to convergence.
+//
+// Per scene: the build's time; the best cost reached within 1x and 5x the build time (read
+// from the converged run's trace, which is what a --time-budget run of that length keeps) and
+// its share of the converged gain (sweep cost -> converged cost, ours; with --reference, also
+// of a given converged cost, e.g. the issue's 357.00 at 4M); the converged cost and time; the
+// peak heap while building and while optimizing, less the mesh, per triangle. The optimizer
+// runs as bake runs it: the references are dropped first (it needs only the tree), so its
+// peak is tree + leaf slots + scratch. Heap figures count every operator new of the process
+// (this program replaces it); the process's peak RSS is printed too.
+//
+// Times are wall seconds of one run on a shared machine: the targets are ratios to the build
+// time measured in the same run, and the growth from the smallest to the largest built-in
+// scene is compared with n log n.
+#include <malloc.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <new>
+#include <string>
+#include <vector>
+
+#include "bench_support.h"
+
+#include "bvhopt/cost.h"
+#include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/references.h"
+#include "bvhopt/scene_file.h"
+#include "bvhopt/sweep_sah_builder.h"
+
+// ---- heap accounting: every allocation of the process, live bytes and their peak ----
+namespace {
+std::atomic<int64_t> g_live{0};
+std::atomic<int64_t> g_peak{0};
+
+void note_alloc(void* p) {
+  if (!p) return;
+  const int64_t now = g_live.fetch_add(static_cast<int64_t>(malloc_usable_size(p))) + static_cast<int64_t>(malloc_usable_size(p));
+  int64_t peak = g_peak.load(std::memory_order_relaxed);
+  while (now > peak && !g_peak.compare_exchange_weak(peak, now)) {
+  }
+}
+void note_free(void* p) {
+  if (p) g_live.fetch_sub(static_cast<int64_t>(malloc_usable_size(p)));
+}
+void* counted_alloc(size_t n) {
+  void* p = std::malloc(n ? n : 1);
+  if (!p) throw std::bad_alloc();
+  note_alloc(p);
+  return p;
+}
+void* counted_aligned(size_t n, std::align_val_t a) {
+  void* p = nullptr;
+  if (posix_memalign(&p, std::max(sizeof(void*), static_cast<size_t>(a)), n ? n : 1) != 0) throw std::bad_alloc();
+  note_alloc(p);
+  return p;
+}
+void counted_free(void* p) {
+  note_free(p);
+  std::free(p);
+}
+}  // namespace
+
+void* operator new(size_t n) { return counted_alloc(n); }
+void* operator new[](size_t n) { return counted_alloc(n); }
+void* operator new(size_t n, std::align_val_t a) { return counted_aligned(n, a); }
+void* operator new[](size_t n, std::align_val_t a) { return counted_aligned(n, a); }
+void operator delete(void* p) noexcept { counted_free(p); }
+void operator delete[](void* p) noexcept { counted_free(p); }
+void operator delete(void* p, size_t) noexcept { counted_free(p); }
+void operator delete[](void* p, size_t) noexcept { counted_free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { counted_free(p); }
+void operator delete[](void* p, std::align_val_t) noexcept { counted_free(p); }
+void operator delete(void* p, size_t, std::align_val_t) noexcept { counted_free(p); }
+void operator delete[](void* p, size_t, std::align_val_t) noexcept { counted_free(p); }
+
+namespace {
+
+using namespace bvhopt;
+using namespace bvhopt::bench;
+
+// Peak RSS of the process (VmHWM), bytes.
+int64_t peak_rss() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmHWM:", 0) == 0) return std::atoll(line.c_str() + 6) * 1024;
+  return 0;
+}
+
+// The peak of live heap bytes from now on, starting at what is live now.
+void reset_heap_peak() { g_peak.store(g_live.load()); }
+
+struct Options {
+  std::vector<std::string> scenes;
+  int threads = 2;
+  std::string json_path;
+  std::map<std::string, double> references;  // scene spec -> a given converged cost
+  double budget = 0.0;                          // in build times; 0: to convergence
+};
+
+Options parse(int argc, char** argv) {
+  Options opt;
+  Args args(argc, argv, "scale_bench");
+  while (args.next()) {
+    const std::string& a = args.current();
+    if (a == "--scene") {
+      opt.scenes.push_back(args.value());
+    } else if (a == "--threads") {
+      opt.threads = std::max(1, std::atoi(args.value().c_str()));
+    } else if (a == "--budget") {
+      opt.budget = std::atof(args.value().c_str());
+    } else if (a == "--json") {
+      opt.json_path = args.value();
+    } else if (a == "--reference") {
+      const std::string v = args.value();
+      const size_t eq = v.rfind('=');
+      if (eq == std::string::npos) throw Error("scale_bench: --reference wants SPEC=COST");
+      opt.references[v.substr(0, eq)] = std::atof(v.c_str() + eq + 1);
+    } else {
+      throw Error("scale_bench: unknown option " + a);
+    }
+  }
+  if (opt.scenes.empty())
+    opt.scenes = {"builtin:atrium?triangles=1000000", "builtin:atrium?triangles=4000000",
+                  (default_scenes_dir() / "conference.obj").string()};
+  return opt;
+}
+
+double share_of_gain(double start, double reached, double converged) {
+  return start > converged ? 100.0 * (start - reached) / (start - converged) : 100.0;
+}
+
+struct Row {
+  std::string spec;
+  uint64_t triangles = 0;
+  double build_s = 0, sweep_cost = 0, cost_1x = 0, cost_5x = 0, converged = 0, converged_s = 0;
+  uint32_t passes = 0;
+  double build_bytes_per_tri = 0, optimize_bytes_per_tri = 0, rss_bytes_per_tri = 0;
+  double reference = 0;  // 0: none given
+  bool converged_run = true;
+};
+
+Row run_scene(const std::string& spec, const Options& opt) {
+  Row row;
+  row.spec = spec;
+  Mesh mesh = load_scene(spec);
+  row.triangles = mesh.triangle_count();
+  const double tris = static_cast<double>(row.triangles);
+  const int64_t mesh_bytes = g_live.load();
+
+  reset_heap_peak();
+  SweepSahConfig sweep;
+  sweep.leaf.max_leaf_size = 1;
+  Bvh bvh;
+  row.build_s = seconds_of([&] {
+    PrimitiveRefs refs = make_references(mesh);
+    bvh = build_sweep_sah(refs, sweep);
+  });
+  row.build_bytes_per_tri = static_cast<double>(g_peak.load() - mesh_bytes) / tris;
+  row.sweep_cost = sah_cost(bvh, CostModel{});
+
+  reset_heap_peak();
+  InsertionConfig cfg;
+  cfg.limits.time_limit = opt.budget * row.build_s;
+  cfg.limits.on_pass = [&](const PassRecord& p) {
+    std::fprintf(stderr, "\r%s: pass %u, %.1f s, best %.4f   ", spec.c_str(), p.pass, p.seconds, p.best_cost);
+  };
+  const OptimizeReport rep = optimize_insertion(bvh, cfg);
+  std::fprintf(stderr, "\n");
+  row.optimize_bytes_per_tri = static_cast<double>(g_peak.load() - mesh_bytes) / tris;
+  row.rss_bytes_per_tri = static_cast<double>(peak_rss()) / tris;
+  row.cost_1x = cost_within(rep, row.build_s, true);
+  row.cost_5x = cost_within(rep, 5.0 * row.build_s, true);
+  row.converged = rep.final_cost;
+  row.converged_s = rep.seconds;
+  row.passes = rep.passes;
+  row.converged_run = rep.stop_reason == StopReason::converged;
+  if (auto it = opt.references.find(spec); it != opt.references.end()) row.reference = it->second;
+  return row;
+}
+
+void print(const std::vector<Row>& rows, int threads) {
+  std::printf("\n%d threads; wall seconds of one run; bytes per triangle less the mesh (heap peak), RSS of the whole process\n\n",
+              threads);
+  std::printf("| scene | triangles | build s | sweep cost | 1x: cost (%% gain) | 5x: cost (%% gain, %% above converged) | "
+              "converged cost | converged s (x build) | passes | heap B/tri build / optimize | RSS B/tri |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
+  for (const Row& r : rows) {
+    std::printf("| %s | %llu | %.2f | %.2f | %.2f (%.1f) | %.2f (%.1f, %.2f) | %.2f%s | %.1f (%.1f) | %u | %.1f / %.1f | %.0f |\n",
+                r.spec.c_str(), static_cast<unsigned long long>(r.triangles), r.build_s, r.sweep_cost, r.cost_1x,
+                share_of_gain(r.sweep_cost, r.cost_1x, r.converged), r.cost_5x,
+                share_of_gain(r.sweep_cost, r.cost_5x, r.converged), 100.0 * (r.cost_5x / r.converged - 1.0), r.converged,
+                r.converged_run ? "" : " (stopped at the budget)", r.converged_s, r.converged_s / r.build_s, r.passes, r.build_bytes_per_tri, r.optimize_bytes_per_tri,
+                r.rss_bytes_per_tri);
+    if (r.reference > 0)
+      std::printf("|   vs given converged %.2f | | | | %.1f %% | %.1f %% | | | | | |\n", r.reference,
+                  share_of_gain(r.sweep_cost, r.cost_1x, r.reference), share_of_gain(r.sweep_cost, r.cost_5x, r.reference));
+  }
+  // Growth of the time to convergence between the smallest and largest built-in scenes.
+  const Row* small = nullptr;
+  const Row* large = nullptr;
+  for (const Row& r : rows) {
+    if (r.spec.rfind("builtin", 0) != 0) continue;
+    if (!small || r.triangles < small->triangles) small = &r;
+    if (!large || r.triangles > large->triangles) large = &r;
+  }
+  if (small && large && large->triangles > small->triangles) {
+    const double n = static_cast<double>(large->triangles) / static_cast<double>(small->triangles);
+    const double nlogn = n * std::log(static_cast<double>(large->triangles)) / std::log(static_cast<double>(small->triangles));
+    std::printf("\ntime to convergence %llu -> %llu triangles: x%.2f (build x%.2f; n log n x%.2f; in build times x%.2f)\n",
+                static_cast<unsigned long long>(small->triangles), static_cast<unsigned long long>(large->triangles),
+                large->converged_s / small->converged_s, large->build_s / small->build_s, nlogn,
+                (large->converged_s / large->build_s) / (small->converged_s / small->build_s));
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options opt;
+  try {
+    opt = parse(argc, argv);
+  } catch (const Error& e) {
+    std::cerr << e.what() << "\n";
+    return 2;
+  }
+  return guarded_main("scale_bench", [&] {
+    ThreadLimit limit(opt.threads);
+    std::vector<Row> rows;
+    for (const std::string& spec : opt.scenes) {
+      rows.push_back(run_scene(spec, opt));
+      // Each scene's figures as soon as they are known: the large runs take long.
+      const Row& r = rows.back();
+      std::fprintf(stderr, "%s: build %.2f s, sweep %.4f, 1x %.4f, 5x %.4f, end %.4f after %.1f s (%s), heap %.1f B/tri\n",
+                   r.spec.c_str(), r.build_s, r.sweep_cost, r.cost_1x, r.cost_5x, r.converged, r.converged_s,
+                   r.converged_run ? "converged" : "budget", r.optimize_bytes_per_tri);
+    }
+    print(rows, opt.threads);
+    if (!opt.json_path.empty()) {
+      nlohmann::json j = nlohmann::json::array();
+      for (const Row& r : rows)
+        j.push_back({{"scene", r.spec},
+                     {"triangles", r.triangles},
+                     {"threads", opt.threads},
+                     {"build_seconds", r.build_s},
+                     {"sweep_cost", r.sweep_cost},
+                     {"cost_at_1x_build", r.cost_1x},
+                     {"cost_at_5x_build", r.cost_5x},
+                     {"converged_cost", r.converged},
+                     {"converged_seconds", r.converged_s},
+                     {"passes", r.passes},
+                     {"heap_bytes_per_triangle_build", r.build_bytes_per_tri},
+                     {"heap_bytes_per_triangle_optimize", r.optimize_bytes_per_tri},
+                     {"peak_rss_bytes_per_triangle", r.rss_bytes_per_tri}});
+      write_json(opt.json_path, j);
+    }
+    return 0;
+  });
+}

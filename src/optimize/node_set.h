@@ -1,0 +1,39 @@
+// A set of node ids for the optimizers' scratch: one bit per node, cleared in time
+// proportional to what was added (the members are listed), so a pass that marks a few
+// nodes of a huge tree neither scans nor reallocates a per-node array.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace bvhopt::detail {
+
+class NodeSet {
+ public:
+  // Empties the set and makes room for ids below `node_count`.
+  void reset(size_t node_count) {
+    clear();
+    if (bits_.size() != (node_count + 63) / 64) bits_.assign((node_count + 63) / 64, 0);
+  }
+  bool contains(uint32_t n) const { return (bits_[n >> 6] >> (n & 63)) & 1u; }
+  // False if n was already in.
+  bool insert(uint32_t n) {
+    uint64_t& word = bits_[n >> 6];
+    const uint64_t bit = uint64_t{1} << (n & 63);
+    if (word & bit) return false;
+    word |= bit;
+    members_.push_back(n);
+    return true;
+  }
+  void clear() {
+    for (uint32_t n : members_) bits_[n >> 6] = 0;
+    members_.clear();
+  }
+  size_t size() const { return members_.size(); }
+
+ private:
+  std::vector<uint64_t> bits_;
+  std::vector<uint32_t> members_;
+};
+
+}  // namespace bvhopt::detail
