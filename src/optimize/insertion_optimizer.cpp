@@ -82,11 +82,11 @@ class InsertionOptimizer {
       : bvh_(bvh), config_(config), parallel_(parallel), after_move_(after_move) {
     for (const BvhNode& n : bvh_.nodes) {
       if (n.is_leaf())
-        leaf_term_ += leaf_cost(n.area, n.ref_count());
+        leaf_term_ += leaf_cost(n.area(), n.ref_count());
       else
-        inner_area_ += n.area;
+        inner_area_ += n.area();
     }
-    root_area_ = bvh_[bvh_.root].area;
+    root_area_ = bvh_[bvh_.root].area();
   }
 
   double cost() const { return (config_.cost.traversal * inner_area_ + leaf_term_) / root_area_; }
@@ -203,9 +203,11 @@ class InsertionOptimizer {
   }
 
   double measure(uint32_t i) const {
+    // Relative to the root's area, so that the float keys of select() neither overflow nor
+    // depend on the scene's scale.
     const BvhNode& n = bvh_[i];
-    const double a = n.area;
-    const double la = bvh_[n.left()].area, ra = bvh_[n.right()].area;
+    const double a = n.area() / root_area_;
+    const double la = bvh_[n.left()].area() / root_area_, ra = bvh_[n.right()].area() / root_area_;
     // Zero-area children (conference's flat triangles) would divide by zero.
     constexpr double tiny = 1e-30;
     switch (config_.measure) {
@@ -220,7 +222,7 @@ class InsertionOptimizer {
 
   std::pair<uint32_t, uint32_t> ordered_children(uint32_t n) const {
     uint32_t a = bvh_[n].left(), b = bvh_[n].right();
-    if (bvh_[b].area > bvh_[a].area) std::swap(a, b);
+    if (bvh_[b].area() > bvh_[a].area()) std::swap(a, b);
     return {a, b};
   }
 
@@ -228,7 +230,7 @@ class InsertionOptimizer {
   void refit_up(uint32_t n) { bvh_.refit_upwards(n, Bvh::RefitScope::until_unchanged, &inner_area_); }
 
   // Figure 3: N and its parent P leave the tree, N's sibling takes P's place.
-  void remove(uint32_t n) { detach(n, bvh_[n].area); }
+  void remove(uint32_t n) { detach(n, bvh_[n].area()); }
 
   // Figure 5: `free_node` becomes the parent of X and L, in X's old place.
   void insert(uint32_t l, uint32_t x, uint32_t free_node) {
@@ -237,7 +239,7 @@ class InsertionOptimizer {
     f.make_inner(x, l);
     f.parent = q;
     f.set_box(merge(bvh_[x].box, bvh_[l].box));
-    inner_area_ += f.area;
+    inner_area_ += f.area();
     if (q == kInvalidNode)
       bvh_.root = free_node;
     else
@@ -259,7 +261,7 @@ class InsertionOptimizer {
       ReinsertionCandidate c = detail::search_reinsertion_after_removal(bvh_, bvh_[m].box, m, heap, path, &freed);
       if (c.node == kInvalidNode) continue;
       // The search counts m's own area as freed; m stays a subtree, only its parent is freed.
-      const double delta = c.cost - (freed - bvh_[m].area);
+      const double delta = c.cost - (freed - bvh_[m].area());
       if (delta < best.delta) best = {m, c.node, delta};
     }
     return best;
@@ -279,7 +281,7 @@ class InsertionOptimizer {
     const uint32_t p = bvh_[m].parent;
     const uint32_t s = bvh_.sibling(m);
     const uint32_t g = bvh_[p].parent;
-    inner_area_ -= also_removed + bvh_[p].area;
+    inner_area_ -= also_removed + bvh_[p].area();
     if (g == kInvalidNode) {
       bvh_.root = s;
       bvh_[s].parent = kInvalidNode;
@@ -354,7 +356,7 @@ class InsertionOptimizer {
   std::vector<uint32_t> touched_;
   uint32_t stamp_ = 0;
 
-  double leaf_cost(float area, uint32_t count) const { return config_.cost.intersection * area * count; }
+  double leaf_cost(double area, uint32_t count) const { return config_.cost.intersection * area * count; }
 };
 
 // The stages of each form: false for a sequential stage, true for a parallel one.
@@ -381,7 +383,9 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     if (!bvh[n].is_leaf()) bvh.refit_node(n);
   {
     InsertionOptimizer probe(bvh, config, false, after_move);
-    driver.set_initial_cost(probe.cost());
+    // A zero-area root has no ratio to track: its cost is the limit sah_cost defines, as
+    // every optimizer reports it.
+    driver.set_initial_cost(probe.can_optimize() ? probe.cost() : sah_cost(bvh, config.cost));
     if (!probe.can_optimize()) {
       driver.stop(StopReason::nothing_to_optimize);
       return driver.finish();
