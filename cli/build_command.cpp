@@ -6,6 +6,7 @@
 #include "bvhopt/build.h"
 #include "bvhopt/bvh_file.h"
 #include "bvhopt/error.h"
+#include "bvhopt/finalize.h"
 #include "bvhopt/leaf_dedup.h"
 #include "bvhopt/stats.h"
 #include "cli_common.h"
@@ -106,7 +107,7 @@ void register_build_command(CLI::App& app) {
   }
   cmd->add_option("--builder", opt->builder, names_help)->check(CLI::IsMember(names))->capture_default_str();
   cmd->add_option("--leaf-size", opt->build.leaf.max_leaf_size, "Largest number of references per leaf")
-      ->check(CLI::Range(1u, 65535u))
+      ->check(CLI::Range(1u, kMaxTracedLeafSize))
       ->capture_default_str();
   CLI::Option* bins =
       cmd->add_option("--bins", opt->build.binned.bin_count,

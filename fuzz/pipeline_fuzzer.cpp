@@ -69,7 +69,7 @@ void check_tree(const Bvh& bvh, const PrimitiveRefs& refs, const std::string& wh
 // Insertion reports NaN on a zero-area root where the other optimizers report the formula's
 // value (issue 14, item 10, fixed separately); drop this allowance with that fix.
 bool known_zero_area_nan(const Bvh& bvh, const std::string& what) {
-  return what.find("insertion") != std::string::npos && !(bvh.nodes[bvh.root].area > 0.0f);
+  return what.find("insertion") != std::string::npos && !(bvh.nodes[bvh.root].area() > 0.0f);
 }
 
 void check_report(const OptimizeReport& report, const std::string& what, bool never_worse) {

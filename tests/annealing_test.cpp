@@ -52,7 +52,7 @@ OracleResult run_oracle(uint32_t sizes_from, uint32_t sizes_to, uint64_t seeds) 
       cfg.seed = s;
       OptimizeReport rep = anneal(bvh, cfg);
       EXPECT_TRUE(validate(bvh, refs).ok());
-      const double opt = testing::optimal_tree_cost(refs, model.traversal, model.intersection) / bvh[bvh.root].area;
+      const double opt = testing::optimal_tree_cost(refs, model.traversal, model.intersection) / bvh[bvh.root].area();
       const double got = sah_cost(bvh, model);
       EXPECT_EQ(got, rep.final_cost);
       EXPECT_GE(got, opt * (1 - 1e-9)) << "below the optimum: the oracle or the cost is wrong";
@@ -84,7 +84,7 @@ TEST(Anneal, HillClimbingAloneDoesNotAlwaysReachTheOptimum) {
       PrimitiveRefs refs = testing::random_refs(count, 1000 * count + s);
       Bvh bvh = median_tree(refs);
       hill_climb(bvh);
-      const double opt = testing::optimal_tree_cost(refs, model.traversal, model.intersection) / bvh[bvh.root].area;
+      const double opt = testing::optimal_tree_cost(refs, model.traversal, model.intersection) / bvh[bvh.root].area();
       ++cases;
       exact += sah_cost(bvh, model) / opt - 1.0 <= 1e-9;
     }

@@ -2,6 +2,7 @@
 // oracle, a brute-force reference for the sweep, and the same tree on 1 and 2 threads.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -81,7 +82,7 @@ void check_tree(const Bvh& bvh, const PrimitiveRefs& refs, uint32_t max_leaf, co
     ASSERT_LT(n, bvh.nodes.size());
     ++reached;
     const BvhNode& nd = bvh[n];
-    ASSERT_EQ(nd.area, nd.box.area()) << "node " << n;
+    ASSERT_EQ(nd.area(), nd.box.area()) << "node " << n;
     Box expect;
     if (nd.is_leaf()) {
       ASSERT_GE(nd.ref_count(), 1u) << "node " << n;
@@ -154,7 +155,7 @@ TEST(Builders, NoBuilderBeatsTheOptimalTree) {
       for (uint64_t seed = 0; seed < 25; ++seed) {
         PrimitiveRefs refs = random_refs(count, 1000 * count + seed);
         Bvh bvh = build_with(kind, refs, 1, 4096);
-        double ours = sah_cost(bvh, m) * double(bvh[bvh.root].area);
+        double ours = sah_cost(bvh, m) * double(bvh[bvh.root].area());
         double best = optimal_tree_cost(refs, m.traversal, m.intersection);
         EXPECT_GE(ours, best * (1.0 - 1e-6)) << name_of(kind) << " n=" << count << " seed " << seed;
       }
@@ -172,7 +173,7 @@ TEST(Builders, SahBuildersComeCloseToTheOptimumOnTinyInputs) {
       for (uint64_t seed = 0; seed < 10; ++seed) {
         PrimitiveRefs refs = random_refs(count, 77 * count + seed);
         Bvh bvh = build_with(kind, refs, 1, 4096);
-        ratio_sum += sah_cost(bvh, m) * double(bvh[bvh.root].area) / optimal_tree_cost(refs, m.traversal, m.intersection);
+        ratio_sum += sah_cost(bvh, m) * double(bvh[bvh.root].area()) / optimal_tree_cost(refs, m.traversal, m.intersection);
         ++runs;
       }
     EXPECT_LT(ratio_sum / runs, 1.10) << name_of(kind);
@@ -214,17 +215,17 @@ std::string brute_force_sweep(const PrimitiveRefs& refs, uint32_t max_leaf, cons
     }
     std::vector<uint32_t> best_order;
     size_t best_k = 0;
-    float best_cost = std::numeric_limits<float>::infinity();
+    double best_cost = std::numeric_limits<double>::infinity();
     size_t best_balance = ~size_t(0);
     if (coincide) {
       best_order = by_x;
       best_k = count / 2;
-      best_cost = bounds(by_x, 0, best_k).area() * float(best_k) + bounds(by_x, best_k, count).area() * float(count - best_k);
+      best_cost = bounds(by_x, 0, best_k).area() * double(best_k) + bounds(by_x, best_k, count).area() * double(count - best_k);
     } else {
       for (int a = 0; a < 3; ++a) {
         std::vector<uint32_t> s = sorted_by(ids, a);
         for (size_t k = 1; k < count; ++k) {
-          float c = bounds(s, 0, k).area_unchecked() * float(k) + bounds(s, k, count).area_unchecked() * float(count - k);
+          double c = bounds(s, 0, k).area_unchecked() * double(k) + bounds(s, k, count).area_unchecked() * double(count - k);
           size_t balance = k * 2 > count ? k * 2 - count : count - k * 2;
           if (c < best_cost || (c == best_cost && balance < best_balance)) {
             best_cost = c;
@@ -288,6 +289,14 @@ TEST(Builders, SameTreeOnOneAndTwoThreads) {
           two = tree_signature(build_with(kind, refs, max_leaf, 32), refs);
           EXPECT_EQ(one, two) << name_of(kind) << " leaf " << max_leaf;
         }
+      }
+      {
+        // More threads than cores: an arena of 8 (the process-wide limit raised to allow it).
+        tbb::global_control allow(tbb::global_control::max_allowed_parallelism, 8);
+        tbb::task_arena arena(8);
+        std::string eight;
+        arena.execute([&] { eight = tree_signature(build_with(kind, refs, max_leaf, 32), refs); });
+        EXPECT_EQ(one, eight) << name_of(kind) << " leaf " << max_leaf << " on 8 threads";
       }
     }
   }
@@ -528,6 +537,61 @@ TEST(Builders, TwoSeparatedClustersAreSplitAtTheRoot) {
       EXPECT_EQ(l, even) << what;
       EXPECT_EQ(r, odd) << what;
     }
+}
+
+// The tree as nested sets, children in sorted order: "((0,1),(2,3))" whichever child a
+// builder put first.
+std::string canonical_tree(const Bvh& bvh, uint32_t n) {
+  const BvhNode& nd = bvh.nodes[n];
+  if (nd.is_leaf()) {
+    std::vector<uint32_t> ids(bvh.ref_indices.begin() + nd.first_ref(), bvh.ref_indices.begin() + nd.first_ref() + nd.ref_count());
+    std::sort(ids.begin(), ids.end());
+    std::string s;
+    for (uint32_t id : ids) s += (s.empty() ? "" : "+") + std::to_string(id);
+    return s;
+  }
+  std::string a = canonical_tree(bvh, nd.left()), b = canonical_tree(bvh, nd.right());
+  if (b < a) std::swap(a, b);
+  return "(" + a + "," + b + ")";
+}
+
+PrimitiveRefs unit_cubes_on_x(const std::vector<float>& xs) {
+  std::vector<Box> boxes;
+  for (float x : xs) boxes.emplace_back(Vec3(x, 0, 0), Vec3(x + 1, 1, 1));
+  return make_references(boxes);
+}
+
+// Hand-made inputs whose whole tree is known. Two pairs far apart: every builder, medians
+// included, pairs them. Three cubes in a row and one far away: the SAH builders cut off the
+// far one (the only cut that saves area), the object median cuts two and two (its rule).
+TEST(Builders, HandMadeInputsGiveTheirKnownTrees) {
+  const PrimitiveRefs pairs = unit_cubes_on_x({0, 2, 10, 12});
+  const PrimitiveRefs row = unit_cubes_on_x({0, 1, 2, 40});
+  for (BuilderKind kind : all_builders()) {
+    BuildOptions o;
+    o.kind = kind;
+    o.leaf.max_leaf_size = 1;
+    EXPECT_EQ(canonical_tree(build_bvh(pairs, o), 0), "((0,1),(2,3))") << builder_name(kind);
+    const Bvh bvh = build_bvh(row, o);
+    const BvhNode& root = bvh.nodes[bvh.root];
+    ASSERT_FALSE(root.is_leaf());
+    std::string l = canonical_tree(bvh, root.left()), r = canonical_tree(bvh, root.right());
+    if (r < l) std::swap(l, r);
+    if (kind == BuilderKind::object_median) {
+      EXPECT_EQ(canonical_tree(bvh, bvh.root), "((0,1),(2,3))");
+    } else if (kind != BuilderKind::spatial_median) {
+      // ((0,1),2) or (0,(1,2)): the two cost the same.
+      EXPECT_EQ(r, "3") << builder_name(kind);
+      EXPECT_TRUE(l == "((0,1),2)" || l == "((1,2),0)") << builder_name(kind) << " " << l;
+    }
+  }
+  // Spatial median: the box's middle on x is 20.5, so the far cube is cut off there too.
+  BuildOptions o;
+  o.kind = BuilderKind::spatial_median;
+  o.leaf.max_leaf_size = 1;
+  const Bvh sm = build_bvh(row, o);
+  const std::string t = canonical_tree(sm, sm.root);
+  EXPECT_TRUE(t == "(((0,1),2),3)" || t == "(((1,2),0),3)") << t;
 }
 
 }  // namespace

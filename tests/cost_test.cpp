@@ -13,7 +13,7 @@ TEST(Cost, HandComputedTwoLeaves) {
   PrimitiveRefs refs = make_references({Box({0, 0, 0}, {1, 1, 1}), Box({1, 0, 0}, {2, 1, 1})});
   Bvh bvh = build_object_median(refs);
   ASSERT_EQ(bvh.nodes.size(), 3u);
-  EXPECT_FLOAT_EQ(bvh[bvh.root].area, 10.0f);
+  EXPECT_FLOAT_EQ(bvh[bvh.root].area(), 10.0f);
   // (3 * 10 + 2 * 6 + 2 * 6) / 10 = 5.4
   EXPECT_NEAR(sah_cost(bvh, CostModel{3, 2}), 5.4, 1e-9);
   EXPECT_NEAR(sah_cost(bvh, CostModel{1, 1}), (10.0 + 12.0) / 10.0, 1e-9);
@@ -67,7 +67,7 @@ TEST(Cost, NoBuilderBeatsTheOracle) {
       BuildOptions o;
       o.kind = kind;
       Bvh bvh = build_bvh(refs, o);
-      EXPECT_GE(sah_cost(bvh, m) * bvh[bvh.root].area, optimum * (1 - 1e-6)) << builder_name(kind) << " " << seed;
+      EXPECT_GE(sah_cost(bvh, m) * bvh[bvh.root].area(), optimum * (1 - 1e-6)) << builder_name(kind) << " " << seed;
     }
   }
 }

@@ -90,7 +90,7 @@ TEST(InsertionSearch, AfterRemovalEqualsBruteForceOnTheRemovedTree) {
         const uint32_t v = stack.back();
         stack.pop_back();
         if (t[v].is_leaf()) continue;
-        sum += t[v].area;
+        sum += t[v].area();
         stack.push_back(t[v].left());
         stack.push_back(t[v].right());
       }
@@ -303,7 +303,7 @@ TEST(InsertionOptimizer, CloseToTheExactOptimumOnSmallInputs) {
       cfg.stop_after = 30;
       OptimizeReport r = optimize_insertion(bvh, cfg);
       ASSERT_TRUE(validate(bvh, refs).ok());
-      const double root_area = bvh[bvh.root].area;
+      const double root_area = bvh[bvh.root].area();
       const double opt = testing::optimal_tree_cost(refs, 3, 2) / root_area;
       ASSERT_GE(r.final_cost, opt * (1 - 1e-9)) << "below the optimum: seed " << seed;
       const double gap = r.final_cost / opt - 1.0;

@@ -44,7 +44,7 @@ TEST(Rotations, PublicMovesKeepTreeValidAndChangeCostByTheirDelta) {
     Bvh bvh = median_tree(refs);
     std::vector<uint32_t> inner = inner_nodes(bvh);
     std::mt19937_64 rng(seed);
-    const double root_area = bvh[bvh.root].area;
+    const double root_area = bvh[bvh.root].area();
     for (int step = 0; step < 300; ++step) {
       uint32_t n = inner[rng() % inner.size()];
       Rotation r = Rotation(rng() % kRotationCount);
@@ -55,7 +55,7 @@ TEST(Rotations, PublicMovesKeepTreeValidAndChangeCostByTheirDelta) {
       // Moves never change the node's own box, so nothing above needs refitting.
       ValidationReport v = validate(bvh, refs);
       ASSERT_TRUE(v.ok()) << "seed " << seed << " step " << step << " " << rotation_name(r) << ": " << v.summary();
-      EXPECT_EQ(bvh[bvh.root].area, root_area);
+      EXPECT_EQ(bvh[bvh.root].area(), root_area);
       EXPECT_NEAR(sah_cost(bvh, model), before + delta / root_area, 1e-9 * before);
     }
   }

@@ -30,16 +30,20 @@ struct Box {
   constexpr Vec3 extent() const { return max - min; }
   constexpr Vec3 center() const { return (min + max) * 0.5f; }
 
-  // Full surface area 2(xy + yz + zx). An empty box has area 0, never a negative value.
-  float area() const {
-    if (is_empty()) return 0.0f;
-    Vec3 e = extent();
-    return 2.0f * (e.x * e.y + e.y * e.z + e.z * e.x);
+  // Full surface area 2(xy + yz + zx), in double: a float overflows for extents above
+  // about 1.3e19 and underflows for extents below about 1e-19, and in double scaling the
+  // box by 2^k scales its area by exactly 4^k, so trees and costs do not depend on the
+  // scene's scale. An empty box has area 0, never a negative value.
+  double area() const {
+    if (is_empty()) return 0.0;
+    return area_unchecked();
   }
-  // Same as area() for a box known to be non-empty; the hot loops use this one.
-  constexpr float area_unchecked() const {
-    Vec3 e = extent();
-    return 2.0f * (e.x * e.y + e.y * e.z + e.z * e.x);
+  // Same as area() for a box known to be non-empty; the hot loops use this one. The
+  // extents are differences taken in double, so they do not overflow either.
+  constexpr double area_unchecked() const {
+    const double x = double(max.x) - double(min.x), y = double(max.y) - double(min.y),
+                 z = double(max.z) - double(min.z);
+    return 2.0 * (x * y + y * z + z * x);
   }
   float volume() const {
     if (is_empty()) return 0.0f;

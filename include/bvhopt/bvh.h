@@ -12,18 +12,33 @@ namespace bvhopt {
 
 inline constexpr uint32_t kInvalidNode = 0xffffffffu;
 
-// 40 bytes. Inner nodes hold two child indices; leaves hold a range of slots in
-// Bvh::ref_indices. The box's surface area is cached because every optimizer reads
-// areas far more often than it changes boxes.
+// The most references a Bvh can hold. An inner node keeps its right child's index where a
+// leaf keeps count | kLeafFlag (bit 31), so every node index must stay below 2^31; a tree
+// over n references has up to 2n - 1 nodes, numbered from 0, so n <= 2^30.
+inline constexpr size_t kMaxReferences = size_t(1) << 30;
+// Throws Error ("<who>: N references, more than the 2^30 a tree can hold") above that; every
+// builder calls it before allocating.
+void check_reference_count(size_t n, const char* who);
+
+// 40 bytes: another 4 are free. Inner nodes hold two child indices; leaves hold a range of
+// slots in Bvh::ref_indices.
+//
+// The node used to cache its box's area as a float. A float cannot hold the areas of a
+// scene's boxes over the float range of its coordinates (they overflow above extents of
+// about 1.3e19 and lose all precision below 1e-19), and a scaled cache needs the tree's
+// scale wherever a box's area is compared with a cached one. area() now computes it from
+// the box, in double, on the cache line the box is read from anyway: every area in every
+// stage is then the same function of the box, exact under scaling by powers of two.
 struct BvhNode {
   static constexpr uint32_t kLeafFlag = 0x80000000u;
 
   Box box;
-  float area = 0.0f;
+  uint32_t unused = 0;  // keeps the layout 40 bytes (the file format does not store it)
   uint32_t parent = kInvalidNode;
   uint32_t left_or_first = kInvalidNode;  // inner: left child; leaf: first slot in ref_indices
   uint32_t right_or_count = 0;            // inner: right child; leaf: count | kLeafFlag
 
+  double area() const { return box.area(); }
   bool is_leaf() const { return (right_or_count & kLeafFlag) != 0; }
   uint32_t left() const { return left_or_first; }
   uint32_t right() const { return right_or_count; }
@@ -40,11 +55,10 @@ struct BvhNode {
     left_or_first = l;
     right_or_count = r;
   }
-  void set_box(const Box& b) {
-    box = b;
-    area = b.area();
-  }
+  void set_box(const Box& b) { box = b; }
 };
+
+static_assert(sizeof(BvhNode) == 40, "the node's size is part of the memory per triangle");
 
 struct Bvh {
   std::vector<BvhNode> nodes;
@@ -63,7 +77,7 @@ struct Bvh {
   // Which child slot (0 or 1) n occupies in its parent.
   int child_slot(uint32_t n) const { return nodes[nodes[n].parent].left() == n ? 0 : 1; }
 
-  // Sets inner node n's box (and area) to the union of its children's.
+  // Sets inner node n's box to the union of its children's.
   void refit_node(uint32_t n) {
     BvhNode& nd = nodes[n];
     nd.set_box(merge(nodes[nd.left()].box, nodes[nd.right()].box));

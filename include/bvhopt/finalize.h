@@ -35,7 +35,11 @@ struct FinalizeOptions {
   bool order_children_by_split_axis = true;
 };
 
-// Leaves with more than 65535 references are rejected (Error): finalize is for traversal.
+// The largest leaf a traced tree holds: FlatNode::count is 16 bits. finalize and
+// flatten_for_tracing refuse larger leaves (Error), and the CLI's --leaf-size stops there.
+inline constexpr uint32_t kMaxTracedLeafSize = 0xffff;
+
+// Leaves with more than kMaxTracedLeafSize references are rejected (Error): finalize is for traversal.
 FlatBvh finalize(const Bvh& bvh, const PrimitiveRefs& refs, const FinalizeOptions& options = {});
 
 // The split axis of section 5 for two child boxes: the axis with the largest gap between

@@ -31,7 +31,7 @@ LeafDedupStats dedup_leaf_references(Bvh& bvh, const PrimitiveRefs& refs);
 // The checks of validate() that still hold after dedup_leaf_references, plus its own:
 // every slot names a reference in range; no reference is in two slots; every triangle id
 // that has a reference in `refs` appears in some leaf; no leaf holds one triangle twice.
-// Structure, inner boxes, cached areas and "leaf box contains its references' boxes" are
+// Structure, inner boxes and "leaf box contains its references' boxes" are
 // checked by validate() on a copy whose references are renumbered to the kept ones.
 ValidationReport validate_deduplicated(const Bvh& bvh, const PrimitiveRefs& refs);
 

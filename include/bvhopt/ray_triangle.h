@@ -1,10 +1,24 @@
 // The watertight ray-triangle test every tracer and oracle uses.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
+
 #include "bvhopt/ray.h"
 #include "bvhopt/triangle.h"
 
 namespace bvhopt {
+
+// The power of two that brings a direction's largest component to [0.5, 1) (1 for a zero
+// or non-finite one). The Moller-Trumbore tests run on the direction times it and multiply
+// the distance back: exact, and their products then stay within float range for any
+// direction length (wide_kernel.h says why).
+inline float mt_direction_scale(float largest_component) {
+  if (!(largest_component > 0.0f) || !std::isfinite(largest_component)) return 1.0f;
+  int e = 0;
+  std::frexp(largest_component, &e);
+  return std::ldexp(1.0f, -std::clamp(e, -126, 127));
+}
 
 // Woop, Benthin and Wald (2013), "Watertight ray/triangle intersection": the triangle is
 // sheared into the ray's space and tested with edge functions that are exact for shared

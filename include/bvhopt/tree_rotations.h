@@ -6,7 +6,7 @@
 //   so no box above N changes either: the change of N's subtree cost is the change of the
 //   whole tree's (unnormalized) cost. A move replaces one or two inner nodes' boxes and
 //   nothing else, so that change is c_T times the change in those boxes' areas; leaves and
-//   c_I never enter it. The optimizers therefore decide from cached areas alone, in constant
+//   c_I never enter it. The optimizers therefore decide from box areas alone, in constant
 //   time per move, and track per-node subtree costs (double) only to report the true cost.
 #pragma once
 

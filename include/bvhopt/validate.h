@@ -16,8 +16,8 @@ struct ValidationReport {
 };
 
 // Checks: the root has no parent; parent and child links agree; no node is reached twice
-// (no cycles, no sharing); every inner node's box equals the union of its children's and
-// its cached area equals its box's area; every leaf's box contains its references' boxes;
+// (no cycles, no sharing); every inner node's box equals the union of its children's;
+// every leaf's box contains its references' boxes;
 // leaves are non-empty; every reference box has min <= max (no NaN); every reference id appears in exactly one leaf slot, and the slots
 // in use are exactly 0..ref_indices.size()-1, once each.
 struct ValidationOptions {

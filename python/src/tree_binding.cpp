@@ -39,7 +39,7 @@ py::array_t<NodeRecord> node_records(const Bvh& bvh) {
       rec.min[a] = n.box.min[a];
       rec.max[a] = n.box.max[a];
     }
-    rec.area = n.area;
+    rec.area = static_cast<float>(n.area());
     rec.parent = n.parent;
     rec.left = n.is_leaf() ? kInvalidNode : n.left();
     rec.right = n.is_leaf() ? kInvalidNode : n.right();

@@ -217,11 +217,11 @@ class SmallSubtreeHeuristic {
       const uint16_t* o = order_[a] + lo;
       best[a] = detail::sweep_sorted_range(
           count, [&](Box& b, size_t k) { extend_box(b, refs_[o[k]]); },
-          [&](size_t k) -> float& { return right_area_[k]; });
+          [&](size_t k) -> double& { return right_area_[k]; });
       if (a > 0 && detail::better_candidate(best[a], best[best_axis])) best_axis = a;
     }
     const size_t best_k = best[best_axis].left_count;
-    if (detail::sah_prefers_leaf(config_, node.area, count, best[best_axis].cost)) return 0;
+    if (detail::sah_prefers_leaf(config_, node.area(), count, best[best_axis].cost)) return 0;
 
     const uint16_t* chosen = order_[best_axis] + lo;
     for (size_t k = 0; k < count; ++k) {
@@ -248,7 +248,7 @@ class SmallSubtreeHeuristic {
   BinRef refs_[kMaxExactSweepBelow];
   uint16_t order_[3][kMaxExactSweepBelow];
   uint16_t spill_[kMaxExactSweepBelow];
-  float right_area_[kMaxExactSweepBelow];
+  double right_area_[kMaxExactSweepBelow];
   uint8_t is_left_[kMaxExactSweepBelow];
 };
 
@@ -321,9 +321,9 @@ class BinnedHeuristic {
         extend_box(k < left_count ? split.left : split.right, refs[k]);
         (k < left_count ? left.cb : right.cb).extend(refs[k]);
       }
-      split.cost = split.left.area() * float(left_count) + split.right.area() * float(count - left_count);
+      split.cost = split.left.area() * double(left_count) + split.right.area() * double(count - left_count);
     }
-    if (detail::sah_prefers_leaf(config_, node.area, count, split.cost)) return 0;
+    if (detail::sah_prefers_leaf(config_, node.area(), count, split.cost)) return 0;
     if (split.axis >= 0) {
       const int axis = split.axis;
       const uint32_t first_right = split.bin;
@@ -347,7 +347,7 @@ class BinnedHeuristic {
   struct Split {
     int axis = -1;
     uint32_t bin = 0;  // first bin of the right side
-    float cost = std::numeric_limits<float>::infinity();
+    double cost = std::numeric_limits<double>::infinity();
     Box left, right;
   };
 
@@ -382,7 +382,7 @@ class BinnedHeuristic {
 
   Split find_split(const Bins& bins) const {
     const uint32_t nb = bins.bin_count;
-    float right_area[kMaxBins];
+    double right_area[kMaxBins];
     uint32_t right_count[kMaxBins];
     Split best;
     uint32_t best_balance = std::numeric_limits<uint32_t>::max();
@@ -401,7 +401,7 @@ class BinnedHeuristic {
         left.extend(bins.box(a, b - 1));
         lc += bins.count[a][b - 1];
         if (lc == 0 || right_count[b] == 0) continue;
-        float c = left.area() * float(lc) + right_area[b] * float(right_count[b]);
+        double c = left.area() * double(lc) + right_area[b] * double(right_count[b]);
         if (c <= best.cost) {
           uint32_t balance = lc > right_count[b] ? lc - right_count[b] : right_count[b] - lc;
           if (c < best.cost || balance < best_balance) {
@@ -499,7 +499,7 @@ Bvh build_binned_sah(const PrimitiveRefs& refs, const BinnedSahConfig& config) {
   validate(config);
   Bvh bvh;
   if (refs.empty()) return bvh;
-  detail::check_reference_count(refs.size(), "binned SAH builder");
+  check_reference_count(refs.size(), "binned SAH builder");
   BinnedHeuristic(refs, config, bvh).run();
   return bvh;
 }

@@ -74,6 +74,7 @@ class MedianHeuristic {
 template <bool kSpatial>
 Bvh build_median(const PrimitiveRefs& refs, const MedianConfig& config) {
   validate(config);
+  check_reference_count(refs.size(), kSpatial ? "spatial median builder" : "object median builder");
   Bvh bvh;
   if (refs.empty()) return bvh;
   MedianHeuristic<kSpatial>(refs, config, bvh).run();

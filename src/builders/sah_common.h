@@ -17,20 +17,13 @@
 
 namespace bvhopt::detail {
 
-// Node indices and leaf counts are 32-bit with a flag bit: 2n - 1 nodes must fit below it.
-inline void check_reference_count(size_t n, const char* builder) {
-  if (n > 0x7fffffffu)
-    throw Error(std::string(builder) + ": " + std::to_string(n) +
-                " references, more than the 2^31 - 1 a tree can hold");
-}
-
 // The one leaf-versus-split test of the SAH builders: a node of at most max_leaf_size
 // references becomes a leaf when intersecting all of it costs no more than the split,
 // c_I SA(N) n <= c_T SA(N) + c_I (SA(L) n_L + SA(R) n_R) with `split_cost` the bracket.
-inline bool sah_prefers_leaf(const BuilderConfig& config, float node_area, size_t count, float split_cost) {
+inline bool sah_prefers_leaf(const BuilderConfig& config, double node_area, size_t count, double split_cost) {
   const double c_t = config.cost.traversal, c_i = config.cost.intersection;
   return count <= config.leaf.max_leaf_size &&
-         c_i * node_area * double(count) <= c_t * node_area + c_i * double(split_cost);
+         c_i * node_area * double(count) <= c_t * node_area + c_i * split_cost;
 }
 
 // Union of n boxes. Min and max are exact, so the result does not depend on how the

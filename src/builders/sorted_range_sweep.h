@@ -12,7 +12,7 @@ namespace bvhopt::detail {
 // A candidate split of a sorted range: the first `left_count` references go left.
 struct SweepCandidate {
   size_t left_count = 0;
-  float cost = std::numeric_limits<float>::infinity();  // SA(L) n_L + SA(R) n_R
+  double cost = std::numeric_limits<double>::infinity();  // SA(L) n_L + SA(R) n_R
   size_t balance = ~size_t(0);                          // |n_L - n_R|
 };
 
@@ -24,7 +24,7 @@ inline bool better_candidate(const SweepCandidate& a, const SweepCandidate& b) {
 }
 
 // Sweeps `count` references in sorted order; every position between two of them is a
-// candidate. `extend(box, k)` adds the k-th reference's box; `suffix_area(k)` is a float
+// candidate. `extend(box, k)` adds the k-th reference's box; `suffix_area(k)` is a double
 // slot that receives the area of references [k, count). Returns the best candidate by
 // better_candidate, the first one on exact ties.
 template <class Extend, class SuffixArea>
@@ -38,7 +38,7 @@ SweepCandidate sweep_sorted_range(size_t count, const Extend& extend, const Suff
   Box left;
   for (size_t k = 1; k < count; ++k) {
     extend(left, k - 1);
-    float c = left.area_unchecked() * float(k) + suffix_area(k) * float(count - k);
+    double c = left.area_unchecked() * double(k) + suffix_area(k) * double(count - k);
     if (c <= best.cost) {
       size_t balance = k * 2 > count ? k * 2 - count : count - k * 2;
       if (c < best.cost || balance < best.balance) best = SweepCandidate{k, c, balance};

@@ -77,11 +77,11 @@ class SweepHeuristic {
       const uint32_t* ids = lists_[0] + r.begin;
       Box l = detail::bounds_of(refs_, ids, split.left_count);
       Box rr = detail::bounds_of(refs_, ids + split.left_count, count - split.left_count);
-      split.cost = l.area() * float(split.left_count) + rr.area() * float(count - split.left_count);
+      split.cost = l.area() * double(split.left_count) + rr.area() * double(count - split.left_count);
     } else {
       split = find_split(r.begin, count, extra);
     }
-    if (detail::sah_prefers_leaf(config_, node.area, count, split.cost)) return 0;
+    if (detail::sah_prefers_leaf(config_, node.area(), count, split.cost)) return 0;
     partition(r.begin, count, split, left.box, right.box, extra);
     return split.left_count;
   }
@@ -93,7 +93,7 @@ class SweepHeuristic {
   // The suffix areas of a sweep and the right part of a stable partition are both
   // per-position scratch over the node's own range, never needed at the same time.
   union Scratch {
-    float area;
+    double area;
     uint32_t id;
   };
 
@@ -117,7 +117,7 @@ class SweepHeuristic {
   struct Split {
     int axis = -1;
     size_t left_count = 0;  // references left of the split, in the axis's sorted order
-    float cost = 0.0f;      // A_L * n_L + A_R * n_R
+    double cost = 0.0;      // A_L * n_L + A_R * n_R
   };
 
   // One axis of the sweep over the node's sorted list; `suffix` receives the areas.
@@ -125,7 +125,7 @@ class SweepHeuristic {
     const Box* boxes = refs_.boxes.data();
     const uint32_t* ids = lists_[a] + begin;
     return detail::sweep_sorted_range(
-        count, [&](Box& b, size_t k) { b.extend(boxes[ids[k]]); }, [&](size_t k) -> float& { return suffix[k].area; });
+        count, [&](Box& b, size_t k) { b.extend(boxes[ids[k]]); }, [&](size_t k) -> double& { return suffix[k].area; });
   }
 
   // Sweeps the node's three sorted lists. Large nodes sweep the three axes at once (each
@@ -207,7 +207,7 @@ Bvh build_sweep_sah(const PrimitiveRefs& refs, const SweepSahConfig& config) {
   validate(config);
   Bvh bvh;
   if (refs.empty()) return bvh;
-  detail::check_reference_count(refs.size(), "sweep SAH builder");
+  check_reference_count(refs.size(), "sweep SAH builder");
   SweepHeuristic(refs, config, bvh).run();
   return bvh;
 }

@@ -142,7 +142,9 @@ std::vector<uint32_t> place_nodes(const Bvh& bvh, const std::vector<uint8_t>& de
     if (nd.is_leaf()) {
       const uint64_t first = nd.first_ref(), count = nd.ref_count();
       if (count == 0) fail(p.node, "leaf holds no references");
-      if (count > 0xffff) fail(p.node, "leaf holds " + std::to_string(count) + " references, more than 65535");
+      if (count > kMaxTracedLeafSize)
+        fail(p.node, "leaf holds " + std::to_string(count) + " references, more than " +
+                         std::to_string(kMaxTracedLeafSize));
       if (first + count > bvh.ref_indices.size())
         fail(p.node, "leaf slots out of range (" + std::to_string(bvh.ref_indices.size()) + " slots)");
       f.index = static_cast<uint32_t>(entry_slot.size());

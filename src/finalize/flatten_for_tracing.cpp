@@ -29,9 +29,9 @@ FlatBvh flatten_for_tracing(const Bvh& bvh, const PrimitiveRefs& refs) {
     if (n.is_leaf()) {
       f.index = static_cast<uint32_t>(out.triangle_ids.size());
       // The flat node's count is 16 bits; casting would drop triangles without a word.
-      if (n.ref_count() > 0xffff)
+      if (n.ref_count() > kMaxTracedLeafSize)
         throw Error("flatten_for_tracing: node " + std::to_string(it.node) + ": leaf holds " +
-                    std::to_string(n.ref_count()) + " references, more than 65535");
+                    std::to_string(n.ref_count()) + " references, more than " + std::to_string(kMaxTracedLeafSize));
       f.count = static_cast<uint16_t>(n.ref_count());
       for (uint32_t i = 0; i < n.ref_count(); ++i)
         out.triangle_ids.push_back(refs.triangle_ids[bvh.ref_indices[n.first_ref() + i]]);

@@ -33,7 +33,7 @@ void check_flat_references(const FlatBvh& bvh) {
 // One BinaryNode per inner flat node, numbered in the flat (depth-first) order so a left
 // child's BinaryNode follows its parent's. A tree that is a single leaf gets one BinaryNode
 // holding that leaf and an empty slot.
-void lay_out_nodes(const FlatBvh& bvh, float pad, BinaryLayout& out) {
+void lay_out_nodes(const FlatBvh& bvh, const detail::BoxPadding& pad, BinaryLayout& out) {
   const size_t n = bvh.nodes.size();
   std::vector<uint32_t> pair_of(n, kInvalidNode);
   uint32_t pairs = 0;
@@ -42,12 +42,12 @@ void lay_out_nodes(const FlatBvh& bvh, float pad, BinaryLayout& out) {
   out.nodes.assign(std::max<uint32_t>(pairs, 1), BinaryNode{});
   auto set_child = [&](BinaryNode& t, int slot, size_t flat) {
     const FlatNode& c = bvh.nodes[flat];
-    t.x[slot] = c.box.min.x - pad;
-    t.x[slot + 2] = c.box.max.x + pad;
-    t.y[slot] = c.box.min.y - pad;
-    t.y[slot + 2] = c.box.max.y + pad;
-    t.z[slot] = c.box.min.z - pad;
-    t.z[slot + 2] = c.box.max.z + pad;
+    t.x[slot] = pad.below(c.box.min.x);
+    t.x[slot + 2] = pad.above(c.box.max.x);
+    t.y[slot] = pad.below(c.box.min.y);
+    t.y[slot + 2] = pad.above(c.box.max.y);
+    t.z[slot] = pad.below(c.box.min.z);
+    t.z[slot + 2] = pad.above(c.box.max.z);
     t.child[slot] = c.is_leaf() ? c.index : pair_of[flat];
     t.count[slot] = (t.count[slot] & ~BinaryNode::kCountMask) | (c.is_leaf() ? c.count : BinaryNode::kInnerChild);
   };
@@ -90,7 +90,7 @@ BinaryLayout make_binary_layout(const FlatBvh& bvh, const Mesh& mesh) {
   check_flat_references(bvh);
   BinaryLayout out;
   out.mesh_triangles = mesh.triangle_count();
-  lay_out_nodes(bvh, detail::box_padding(bvh), out);
+  lay_out_nodes(bvh, detail::BoxPadding(bvh), out);
   lay_out_leaf_vertices(bvh, mesh, out);
   return out;
 }

@@ -124,9 +124,13 @@ class OptimalCollapse {
         internal_split_(bvh.nodes.size()), leaf_(bvh.nodes.size()) {
     const uint32_t n = uint32_t(bvh.nodes.size());
     const uint32_t w = width_;
+    // Areas relative to the root's: the float table then holds the same numbers at every
+    // scale of the scene (absolute areas overflow a float above extents of about 1e19).
+    const double root_area = n ? bvh.nodes[0].box.area() : 0.0;
+    const double per_area = root_area > 0.0 ? 1.0 / root_area : 1.0;
     for (uint32_t i = n; i-- > 0;) {
       const FlatNode& f = bvh.nodes[i];
-      const float area = f.box.area();
+      const float area = float(f.box.area() * per_area);
       float* c = &cost_[size_t(i) * w];
       uint8_t* ch = &choice_[size_t(i) * w];
       float leaf_cost = kInf;
@@ -207,7 +211,7 @@ void greedy_children(const FlatBvh& bvh, uint32_t n, uint32_t width, std::vector
   out.push_back(right_of(bvh, n));
   while (out.size() < width) {
     int best = -1;
-    float best_area = -1.0f;
+    double best_area = -1.0;
     for (size_t s = 0; s < out.size(); ++s) {
       const FlatNode& f = bvh.nodes[out[s]];
       if (!f.is_leaf() && f.box.area() > best_area) {

@@ -91,7 +91,7 @@ class LayoutBuilder {
 
  public:
   LayoutBuilder(const CollapsedBvh& wide, const FlatBvh& bvh, const Mesh& mesh, TriangleTest test)
-      : wide_(wide), bvh_(bvh), mesh_(mesh), test_(test), pad_(detail::box_padding(bvh)), arena_(arena_bound(wide)) {}
+      : wide_(wide), bvh_(bvh), mesh_(mesh), test_(test), pad_(bvh), arena_(arena_bound(wide)) {}
 
   // Every node, and every leaf's blocks with a 64-byte alignment gap.
   static size_t arena_bound(const CollapsedBvh& wide) {
@@ -164,8 +164,8 @@ class LayoutBuilder {
       const uint32_t c = s - begin;
       const float lo[3] = {b.min.x, b.min.y, b.min.z}, hi[3] = {b.max.x, b.max.y, b.max.z};
       for (int a = 0; a < 3; ++a) {
-        node.bounds[2 * a][c] = lo[a] - pad_;
-        node.bounds[2 * a + 1][c] = hi[a] + pad_;
+        node.bounds[2 * a][c] = pad_.below(lo[a]);
+        node.bounds[2 * a + 1][c] = pad_.above(hi[a]);
       }
       centre[c] = b.center();
     }
@@ -188,7 +188,7 @@ class LayoutBuilder {
   const FlatBvh& bvh_;
   const Mesh& mesh_;
   TriangleTest test_;
-  float pad_;
+  detail::BoxPadding pad_;
   ArenaWriter arena_;
   size_t nodes_ = 0, blocks_ = 0;
 };

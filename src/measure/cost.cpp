@@ -1,32 +1,60 @@
 #include "bvhopt/cost.h"
 
 #include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "bvhopt/error.h"
 
 namespace bvhopt {
 
+namespace {
+
+double extent_sum(const Box& b) {
+  if (b.is_empty()) return 0.0;
+  return (double(b.max.x) - b.min.x) + (double(b.max.y) - b.min.y) + (double(b.max.z) - b.min.z);
+}
+
+}  // namespace
+
+CostWeights::CostWeights(const Bvh& bvh) {
+  if (bvh.empty()) return;
+  const Box& root = bvh[bvh.root].box;
+  root_area_ = root.area();
+  if (root_area_ > 0.0) return;
+  // Every box lies on one axis-parallel segment (or is one point): see the header.
+  flat_ = true;
+  const double s = extent_sum(root);
+  per_extent_ = s > 0.0 ? 1.0 / s : 0.0;
+}
+
+double CostWeights::operator()(const BvhNode& n) const {
+  if (!flat_) return n.area();
+  return per_extent_ > 0.0 ? extent_sum(n.box) * per_extent_ : 1.0;
+}
+
+void check_finite_cost(double cost, const char* what) {
+  if (!std::isfinite(cost))
+    throw Error(std::string(what) + ": the SAH cost is " + (std::isnan(cost) ? "NaN" : "infinite") +
+                " (a box or a cost constant is not finite)");
+}
+
 std::vector<double> subtree_costs(const Bvh& bvh, const CostModel& model) {
   std::vector<double> cost(bvh.nodes.size(), 0.0);
+  const CostWeights w(bvh);
   for (uint32_t n : bvh.post_order()) {
     const BvhNode& nd = bvh[n];
-    cost[n] = nd.is_leaf() ? leaf_cost(nd.area, nd.ref_count(), model)
-                           : model.traversal * nd.area + cost[nd.left()] + cost[nd.right()];
+    cost[n] = nd.is_leaf() ? leaf_cost(w(nd), nd.ref_count(), model)
+                           : model.traversal * w(nd) + cost[nd.left()] + cost[nd.right()];
   }
   return cost;
 }
 
 double sah_cost(const Bvh& bvh, const CostModel& model) {
   if (bvh.empty()) return 0.0;
-  double root_area = bvh[bvh.root].area;
-  std::vector<double> cost = subtree_costs(bvh, model);
-  // A tree over one point (or coincident points) has a zero-area root: its cost is the
-  // leaf count times c_I, the limit of the formula as the box shrinks uniformly.
-  if (!(root_area > 0.0)) {
-    double refs = 0.0;
-    for (uint32_t n : bvh.post_order())
-      if (bvh[n].is_leaf()) refs += bvh[n].ref_count();
-    return model.intersection * refs;
-  }
-  return cost[bvh.root] / root_area;
+  const double c = subtree_costs(bvh, model)[bvh.root] / CostWeights(bvh).root();
+  check_finite_cost(c, "cost");
+  return c;
 }
 
 CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size) {
@@ -34,18 +62,19 @@ CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t ma
   out.best.assign(bvh.nodes.size(), 0.0);
   out.collapse.assign(bvh.nodes.size(), 0);
   if (bvh.empty()) return out;
+  const CostWeights w(bvh);
   std::vector<uint64_t> count(bvh.nodes.size(), 0);
   for (uint32_t n : bvh.post_order()) {
     const BvhNode& nd = bvh[n];
     if (nd.is_leaf()) {
       count[n] = nd.ref_count();
-      out.best[n] = leaf_cost(nd.area, nd.ref_count(), model);
+      out.best[n] = leaf_cost(w(nd), nd.ref_count(), model);
       continue;
     }
     count[n] = count[nd.left()] + count[nd.right()];
-    const double as_tree = model.traversal * nd.area + out.best[nd.left()] + out.best[nd.right()];
+    const double as_tree = model.traversal * w(nd) + out.best[nd.left()] + out.best[nd.right()];
     const bool may_collapse = max_leaf_size == 0 || count[n] <= max_leaf_size;
-    const double as_leaf = model.intersection * nd.area * static_cast<double>(count[n]);
+    const double as_leaf = model.intersection * w(nd) * static_cast<double>(count[n]);
     out.collapse[n] = may_collapse && as_leaf <= as_tree;
     out.best[n] = out.collapse[n] ? as_leaf : as_tree;
   }
@@ -54,9 +83,9 @@ CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t ma
 
 double optimal_collapse_cost(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size) {
   if (bvh.empty()) return 0.0;
-  double root_area = bvh[bvh.root].area;
-  if (!(root_area > 0.0)) return sah_cost(bvh, model);
-  return collapse_costs(bvh, model, max_leaf_size).best[bvh.root] / root_area;
+  const double c = collapse_costs(bvh, model, max_leaf_size).best[bvh.root] / CostWeights(bvh).root();
+  check_finite_cost(c, "ocost");
+  return c;
 }
 
 }  // namespace bvhopt

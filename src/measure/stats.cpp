@@ -7,7 +7,7 @@
 
 namespace bvhopt {
 
-// Expects a valid tree (see validate()). Areas are the nodes' cached areas, the same
+// Expects a valid tree (see validate()). Areas are the nodes' area(), the same
 // numbers the cost functions read, so the sums and the cost agree.
 TreeStats compute_stats(const Bvh& bvh, const CostModel& model) {
   TreeStats s;
@@ -28,7 +28,7 @@ TreeStats compute_stats(const Bvh& bvh, const CostModel& model) {
       s.inner_area_by_depth.resize(depth + 1, 0.0);
       s.leaf_area_by_depth.resize(depth + 1, 0.0);
     }
-    const double area = nd.area;
+    const double area = nd.area();
     if (nd.is_leaf()) {
       ++s.leaves;
       const uint32_t c = nd.ref_count();
@@ -49,7 +49,7 @@ TreeStats compute_stats(const Bvh& bvh, const CostModel& model) {
   s.min_refs_per_leaf = s.leaves ? min_refs : 0;
   s.mean_leaf_depth = s.leaves ? static_cast<double>(leaf_depth_sum) / static_cast<double>(s.leaves) : 0.0;
   s.mean_refs_per_leaf = s.leaves ? static_cast<double>(s.references) / static_cast<double>(s.leaves) : 0.0;
-  s.root_area = bvh[bvh.root].area;
+  s.root_area = bvh[bvh.root].area();
   s.cost = sah_cost(bvh, model);
   s.ocost = optimal_collapse_cost(bvh, model, 0);
   return s;

@@ -40,15 +40,6 @@ class Collector {
   size_t total_ = 0;
 };
 
-// Relative 1e-6: the cached area is a float computed from the same box, so it should
-// match bit for bit; the tolerance only forgives a different evaluation order.
-bool area_matches(float cached, float actual) {
-  if (cached == actual) return true;
-  double a = cached, b = actual;
-  if (!std::isfinite(a) || !std::isfinite(b)) return false;
-  return std::fabs(a - b) <= 1e-6 * std::max(std::fabs(a), std::fabs(b));
-}
-
 }  // namespace
 
 std::string ValidationReport::summary() const {
@@ -112,7 +103,7 @@ void union_problem(Validation& v, uint32_t p, const Box& pbox, const Box& u) {
 }
 
 // What every node is checked for when popped: its parent link, the union its parent's
-// visit deferred to it, its cached area.
+// visit deferred to it.
 void check_node(Validation& v, const Visit& visit) {
   const uint32_t n = visit.node;
   const BvhNode& nd = v.bvh.nodes[n];
@@ -122,11 +113,6 @@ void check_node(Validation& v, const Visit& visit) {
   if (visit.check_union) {
     const Box u = merge(visit.sibling_box, nd.box);
     if (!(u == visit.parent_box)) union_problem(v, visit.parent, visit.parent_box, u);
-  }
-  if (!area_matches(nd.area, nd.box.area())) {
-    char buf[128];
-    std::snprintf(buf, sizeof buf, ": cached area %.9g differs from its box's area %.9g", nd.area, nd.box.area());
-    v.out.add("node " + num(n) + buf);
   }
 }
 

@@ -85,11 +85,11 @@ class InsertionOptimizer {
       : bvh_(bvh), config_(config), parallel_(parallel), after_move_(after_move) {
     for (const BvhNode& n : bvh_.nodes) {
       if (n.is_leaf())
-        leaf_term_ += leaf_cost(n.area, n.ref_count());
+        leaf_term_ += leaf_cost(n.area(), n.ref_count());
       else
-        inner_area_ += n.area;
+        inner_area_ += n.area();
     }
-    root_area_ = bvh_[bvh_.root].area;
+    root_area_ = bvh_[bvh_.root].area();
   }
 
   double cost() const { return (config_.cost.traversal * inner_area_ + leaf_term_) / root_area_; }
@@ -273,9 +273,11 @@ class InsertionOptimizer {
   }
 
   double measure(uint32_t i) const {
+    // Relative to the root's area, so that the float keys of select() neither overflow nor
+    // depend on the scene's scale.
     const BvhNode& n = bvh_[i];
-    const double a = n.area;
-    const double la = bvh_[n.left()].area, ra = bvh_[n.right()].area;
+    const double a = n.area() / root_area_;
+    const double la = bvh_[n.left()].area() / root_area_, ra = bvh_[n.right()].area() / root_area_;
     // Zero-area children (conference's flat triangles) would divide by zero.
     constexpr double tiny = 1e-30;
     switch (config_.measure) {
@@ -290,7 +292,7 @@ class InsertionOptimizer {
 
   std::pair<uint32_t, uint32_t> ordered_children(uint32_t n) const {
     uint32_t a = bvh_[n].left(), b = bvh_[n].right();
-    if (bvh_[b].area > bvh_[a].area) std::swap(a, b);
+    if (bvh_[b].area() > bvh_[a].area()) std::swap(a, b);
     return {a, b};
   }
 
@@ -302,9 +304,9 @@ class InsertionOptimizer {
       const Box b = merge(bvh_[nd.left()].box, bvh_[nd.right()].box);
       if (b == nd.box) return;
       undo_.save(bvh_, n);
-      const float old_area = nd.area;
+      const double old_area = nd.area();
       nd.set_box(b);
-      inner_area_ += static_cast<double>(nd.area) - old_area;
+      inner_area_ += nd.area() - old_area;
     }
   }
   void save(uint32_t n) {
@@ -312,7 +314,7 @@ class InsertionOptimizer {
   }
 
   // Figure 3: N and its parent P leave the tree, N's sibling takes P's place.
-  void remove(uint32_t n) { detach(n, bvh_[n].area); }
+  void remove(uint32_t n) { detach(n, bvh_[n].area()); }
 
   // Figure 5: `free_node` becomes the parent of X and L, in X's old place.
   void insert(uint32_t l, uint32_t x, uint32_t free_node) {
@@ -322,7 +324,7 @@ class InsertionOptimizer {
     f.make_inner(x, l);
     f.parent = q;
     f.set_box(merge(bvh_[x].box, bvh_[l].box));
-    inner_area_ += f.area;
+    inner_area_ += f.area();
     if (q == kInvalidNode)
       bvh_.root = free_node;
     else
@@ -344,7 +346,7 @@ class InsertionOptimizer {
       ReinsertionCandidate c = detail::search_reinsertion_after_removal(bvh_, bvh_[m].box, m, heap, path, &freed);
       if (c.node == kInvalidNode) continue;
       // The search counts m's own area as freed; m stays a subtree, only its parent is freed.
-      const double delta = c.cost - (freed - bvh_[m].area);
+      const double delta = c.cost - (freed - bvh_[m].area());
       if (delta < best.delta) best = {m, c.node, delta};
     }
     return best;
@@ -365,7 +367,7 @@ class InsertionOptimizer {
     const uint32_t s = bvh_.sibling(m);
     const uint32_t g = bvh_[p].parent;
     for (uint32_t v : {m, p, s, g}) save(v);
-    inner_area_ -= also_removed + bvh_[p].area;
+    inner_area_ -= also_removed + bvh_[p].area();
     if (g == kInvalidNode) {
       bvh_.root = s;
       bvh_[s].parent = kInvalidNode;
@@ -441,7 +443,7 @@ class InsertionOptimizer {
   detail::NodeSet touched_;  // nodes a move of this parallel pass changed
   detail::UndoLog undo_;
 
-  double leaf_cost(float area, uint32_t count) const { return config_.cost.intersection * area * count; }
+  double leaf_cost(double area, uint32_t count) const { return config_.cost.intersection * area * count; }
 };
 
 // The stages of each form: false for a sequential stage, true for a parallel one.
@@ -469,7 +471,9 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     if (!bvh.nodes[i].is_leaf()) bvh.refit_node(static_cast<uint32_t>(i));
   {
     InsertionOptimizer probe(bvh, config, false, after_move);
-    driver.set_initial_cost(probe.cost());
+    // A zero-area root has no ratio to track: its cost is the limit sah_cost defines, as
+    // every optimizer reports it.
+    driver.set_initial_cost(probe.can_optimize() ? probe.cost() : sah_cost(bvh, config.cost));
     if (!probe.can_optimize()) {
       driver.stop(StopReason::nothing_to_optimize);
       return driver.finish();

@@ -8,6 +8,7 @@
 #include <optional>
 #include <utility>
 
+#include "bvhopt/cost.h"
 #include "bvhopt/optimize_report.h"
 #include "bvhopt/optimizer_config.h"
 
@@ -29,7 +30,9 @@ class PassDriver {
   explicit PassDriver(const OptimizeLimits& limits) : limits_(limits) {}
 
   // The cost before the first pass (also the final cost of a run that makes no pass).
+  // A cost that is not a number is an error (Error), never a result: no run converges on it.
   void set_initial_cost(double cost) {
+    check_finite_cost(cost, "optimize");
     report_.initial_cost = report_.final_cost = cost;
     best_ = cost;
   }
@@ -69,6 +72,7 @@ class PassDriver {
     }
     if (!current_is_best && best_tree) work.restore(std::move(*best_tree));
     report_.final_cost = work.cost();
+    check_finite_cost(report_.final_cost, "optimize");
   }
 
   // After the last stage (or instead of any): the report, with the total time.
@@ -84,6 +88,7 @@ class PassDriver {
 
   // Adds the pass to the report and calls back; true when the run must stop.
   bool record(const PassResult& r) {
+    check_finite_cost(r.cost, "optimize");
     best_ = std::min(best_, r.cost);
     PassRecord rec;
     rec.pass = ++report_.passes;

@@ -22,7 +22,7 @@ ReinsertionCandidate find_reinsertion_brute_force(const Bvh& bvh, const Box& box
     const double total = e.induced + direct;
     if (total < best.cost && e.node != pass_through) best = {e.node, total};
     if (x.is_leaf()) continue;
-    const double child_induced = e.induced + (direct - static_cast<double>(x.area));
+    const double child_induced = e.induced + (direct - static_cast<double>(x.area()));
     stack.push_back({child_induced, x.right()});
     stack.push_back({child_induced, x.left()});
   }

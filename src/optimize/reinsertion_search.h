@@ -26,7 +26,7 @@ inline double placement_cost(const Bvh& bvh, const Box& box, uint32_t x, std::ve
   double induced = 0.0;
   for (size_t i = path.size(); i-- > 0;) {
     const BvhNode& a = bvh[path[i]];
-    induced = induced + (merge(a.box, box).area() - static_cast<double>(a.area));
+    induced = induced + (merge(a.box, box).area() - a.area());
   }
   return induced + merge(bvh[x].box, box).area();
 }
@@ -54,7 +54,7 @@ inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, u
     if (bvh.root != skip) {
       const double direct = merge(r.box, box).area();
       if (bvh.root != pass_through && (start.node == kInvalidNode || direct < best.cost)) best = {bvh.root, direct};
-      if (!r.is_leaf()) heap.push_back({direct - static_cast<double>(r.area), bvh.root});
+      if (!r.is_leaf()) heap.push_back({direct - static_cast<double>(r.area()), bvh.root});
     }
   }
   while (!heap.empty()) {
@@ -76,7 +76,7 @@ inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, u
       // Written as induced + growth (never (induced + direct) - area): a sum of non-negative
       // terms rounds monotonically, so the bound never exceeds a true cost in the subtree
       // and the search stays exact to the last bit.
-      const double child_induced = e.induced + (direct - static_cast<double>(cn.area));
+      const double child_induced = e.induced + (direct - static_cast<double>(cn.area()));
       if (child_induced + l_area < best.cost) {
         heap.push_back({child_induced, c});
         std::push_heap(heap.begin(), heap.end(), later);
@@ -104,14 +104,14 @@ inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, con
   heap.clear();
   path.clear();
   // Shrunk boxes bottom-up: each ancestor of P without n's subtree.
-  double freed = static_cast<double>(nodes[n].area) + nodes[p].area;
+  double freed = static_cast<double>(nodes[n].area()) + nodes[p].area();
   Box below = nodes[s].box;
   uint32_t from = p;
   for (uint32_t a = nodes[p].parent; a != kInvalidNode; a = nodes[a].parent) {
     const uint32_t other = nodes[a].left() == from ? nodes[a].right() : nodes[a].left();
     below = merge(below, nodes[other].box);
     path.push_back({a, below});
-    freed += static_cast<double>(nodes[a].area) - below.area();
+    freed += static_cast<double>(nodes[a].area()) - below.area();
     from = a;
   }
   if (gain) *gain = freed;
@@ -122,7 +122,7 @@ inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, con
     const double total = induced + direct;
     if (total < best.cost) best = {c, total};
     if (cn.is_leaf()) return;
-    const double child_induced = induced + (direct - static_cast<double>(cn.area));
+    const double child_induced = induced + (direct - static_cast<double>(cn.area()));
     if (child_induced + l_area < best.cost) {
       heap.push_back({child_induced, c});
       std::push_heap(heap.begin(), heap.end(), later);

@@ -89,11 +89,11 @@ double rotation_cost_delta(const Bvh& bvh, uint32_t node, Rotation r, const Cost
   double now = 0.0, before = 0.0;
   if (p.left_changes) {
     now += double(p.new_left.area());
-    before += double(bvh[n.left()].area);
+    before += double(bvh[n.left()].area());
   }
   if (p.right_changes) {
     now += double(p.new_right.area());
-    before += double(bvh[n.right()].area);
+    before += double(bvh[n.right()].area());
   }
   return model.traversal * (now - before);
 }
@@ -181,7 +181,7 @@ OptimizeReport run(Bvh& bvh, const OptimizerConfig& config, const Schedule& sche
   detail::PassDriver driver(config.limits);
   driver.set_initial_cost(sah_cost(bvh, config.cost));
   // Nothing to rotate, or a tree of zero area where every move changes nothing.
-  if (bvh.empty() || bvh[bvh.root].is_leaf() || !(bvh[bvh.root].area > 0.0f)) return driver.finish();
+  if (bvh.empty() || bvh[bvh.root].is_leaf() || !(bvh[bvh.root].area() > 0.0)) return driver.finish();
   detail::RotationEngine engine(bvh, config.cost);
   driver.set_initial_cost(engine.tree_cost());
   RotationPasses passes(engine, schedule);

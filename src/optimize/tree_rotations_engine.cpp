@@ -21,8 +21,8 @@ inline RandomStream task_stream(uint64_t seed, uint32_t pass, uint64_t position)
 
 constexpr int kMoves = 6;
 
-inline float area_of(const Box& b) { return b.area_unchecked(); }
-inline float merged_area(const Box& a, const Box& b) { return area_of(merge(a, b)); }
+inline double area_of(const Box& b) { return b.area_unchecked(); }
+inline double merged_area(const Box& a, const Box& b) { return area_of(merge(a, b)); }
 
 }  // namespace
 
@@ -46,7 +46,7 @@ RotationEngine::RotationEngine(const Bvh& bvh, const CostModel& model) : c_t_(mo
     r.orig = b;
     if (bn.is_leaf()) {
       r.first = kRotLeaf;
-      cost_[s] = model.intersection * static_cast<double>(bn.area) * bn.ref_count();
+      cost_[s] = model.intersection * static_cast<double>(bn.area()) * bn.ref_count();
     } else {
       const uint32_t c = 2 * next_pair++;
       r.first = c;
@@ -224,9 +224,9 @@ inline bool RotationEngine::visit(uint32_t s, double t_over_energy, RandomStream
   const RotNode& ln = kids.n[0];
   const RotNode& rn = kids.n[1];
   const bool li = ln.first != kRotLeaf, ri = rn.first != kRotLeaf;
-  const float an = area_of(nd.box);
+  const double an = area_of(nd.box);
   int best_move = -1;
-  if ((li || ri) && an > 0.0f) {
+  if ((li || ri) && an > 0.0) {
     double d[kMoves];
     int from = 0, to = 0;
     const double al = area_of(ln.box), ar = area_of(rn.box);

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <string>
 
@@ -125,6 +126,9 @@ std::vector<RayKind> all_ray_kinds() {
 }
 
 Camera default_camera(const Mesh& mesh, const Tracer& tracer, uint32_t width, uint32_t height, int up_axis) {
+  // Only keeps a point-sized scene's camera off its target; any fixed length would move
+  // the camera of a scene smaller than it (a scene scaled by 2^-60 is 1e-18 across).
+  constexpr float kTiny = std::numeric_limits<float>::min();
   if (up_axis < 0 || up_axis > 2) throw Error("default camera: up axis " + std::to_string(up_axis) + " is not 0, 1 or 2");
   const Box box = mesh_bounds(mesh);
   const Vec3 centre = box.center();
@@ -148,7 +152,9 @@ Camera default_camera(const Mesh& mesh, const Tracer& tracer, uint32_t width, ui
     ++hits;
     reach.push_back(h.t / boundary_t);
     const Triangle t = mesh.triangle(h.triangle_id);
-    front += dot(cross(t.v1 - t.v0, t.v2 - t.v0), dir) < 0.0f ? 1 : 0;
+    // The unit direction: with `dir` (the box's size) the product is a cube of the
+    // scene's scale, which overflows a float above coordinates of about 7e12.
+    front += dot(cross(t.v1 - t.v0, t.v2 - t.v0), normalize(dir)) < 0.0f ? 1 : 0;
   };
   for (int a = 0; a < 3; ++a)
     for (float s : {-1.0f, 1.0f}) probe(axis_vector(a, s), 0.5f * ext[a]);
@@ -167,7 +173,7 @@ Camera default_camera(const Mesh& mesh, const Tracer& tracer, uint32_t width, ui
   // inward-facing triangles is hit close to the centre).
   if (hits >= 12 && 2 * front > hits && median_reach >= 0.3f) {
     cam.position = centre;
-    cam.target = centre + axis_vector(long_axis, std::max(ext[long_axis], 1e-6f));
+    cam.target = centre + axis_vector(long_axis, std::max(ext[long_axis], kTiny));
     return cam;
   }
   // Frame the box: its extent along up fills the height, along the long axis the width,
@@ -175,7 +181,7 @@ Camera default_camera(const Mesh& mesh, const Tracer& tracer, uint32_t width, ui
   const float tan_half = std::tan(0.5f * cam.fov_degrees * std::numbers::pi_v<float> / 180.0f);
   const float aspect = float(width) / float(std::max<uint32_t>(height, 1));
   const float fit = std::max(0.5f * ext[up_axis] / tan_half, 0.5f * ext[long_axis] / (tan_half * aspect));
-  const float distance = std::max(0.5f * ext[short_axis] + 1.1f * fit, 1e-6f);
+  const float distance = std::max(0.5f * ext[short_axis] + 1.1f * fit, kTiny);
   cam.target = centre;
   cam.position = centre + axis_vector(short_axis, distance);
   return cam;

@@ -27,13 +27,15 @@ inline __attribute__((always_inline)) bool watertight_test(const WatertightRay& 
   if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f)) return false;
   const float det = U + V + W;
   if (det == 0.0f) return false;
-  const float T = U * (r.shear_z * az) + V * (r.shear_z * bz) + W * (r.shear_z * cz);
+  // The distance from the normalized barycentrics: U * az is a cube of the scene's scale,
+  // which overflows a float above coordinates of about 7e12 (and underflows below 1e-13).
   const float inv_det = 1.0f / det;
-  const float t = T * inv_det;
+  const float u = U * inv_det, v = V * inv_det, w = W * inv_det;
+  const float t = u * (r.shear_z * az) + v * (r.shear_z * bz) + w * (r.shear_z * cz);
   if (!(t >= r.tmin && t <= r.tmax && t < hit.t)) return false;
   hit.t = t;
-  hit.u = V * inv_det;
-  hit.v = W * inv_det;
+  hit.u = v;
+  hit.v = w;
   return true;
 }
 

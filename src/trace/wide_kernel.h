@@ -38,6 +38,12 @@ struct KernelRay {
   uint32_t near_row[3], far_row[3];  // bounds row (0..5) of the near and far plane per axis
   uint32_t octant;
   float tmin;
+  // Moller-Trumbore runs on dir * t_scale, a power of two that brings the largest component
+  // to [0.5, 1): its determinant is a product of the direction and two edges, which for an
+  // unnormalized direction (segment rays) is a cube of the scene's scale and leaves the
+  // float range above about 7e12 or below 1e-13. Exact, so the hits are those of dir itself;
+  // the distance found is multiplied back by t_scale.
+  float t_scale;
   // Watertight test (Woop et al. 2013).
   int kx, ky, kz;
   float sx, sy, sz;
@@ -49,6 +55,7 @@ inline KernelRay make_ray(const Ray& ray) {
   const float d[3] = {ray.dir.x, ray.dir.y, ray.dir.z};
   const float o[3] = {ray.org.x, ray.org.y, ray.org.z};
   const float biggest = max_f(abs_f(d[0]), max_f(abs_f(d[1]), abs_f(d[2])));
+  r.t_scale = mt_direction_scale(biggest);
   r.octant = 0;
   for (int a = 0; a < 3; ++a) {
     const bool neg = __builtin_signbit(d[a]) != 0;
@@ -57,7 +64,7 @@ inline KernelRay make_ray(const Ray& ray) {
     float c = d[a];
     if (abs_f(c) < biggest * 1e-20f) c = neg ? -biggest * 1e-20f : biggest * 1e-20f;
     r.org[a] = o[a];
-    r.dir[a] = d[a];
+    r.dir[a] = d[a] * r.t_scale;
     r.rdir[a] = 1.0f / c;
     r.org_rdir[a] = o[a] * r.rdir[a];
     r.near_row[a] = uint32_t(2 * a + (neg ? 1 : 0));
@@ -196,8 +203,8 @@ inline bool offer_lanes(uint32_t mask, __m128 t, __m128 u, __m128 v, const uint3
 // Moller-Trumbore with the operation order of brute_force_closest_mt. The barycentric and
 // distance numerators are compared against |det| before any division (their signs flipped
 // with det's), so a block the ray misses costs no division; only blocks with a lane inside
-// the triangle and not beyond the current hit divide. The distance pre-filter is widened by
-// 2^-20 so it never rejects a lane the exact test after the division would accept.
+// the triangle divide. The distance is e2 . (q / |det|): e2 . q is a cube of the scene's
+// scale, which overflows a float above coordinates of about 7e12.
 inline __attribute__((always_inline)) bool block_moller_trumbore(const TriangleBlock& b, const KernelRay& r, BestHit& best) {
   const __m128 dx = _mm_set1_ps(r.dir[0]), dy = _mm_set1_ps(r.dir[1]), dz = _mm_set1_ps(r.dir[2]);
   const __m128 e1x = _mm_load_ps(b.p[3]), e1y = _mm_load_ps(b.p[4]), e1z = _mm_load_ps(b.p[5]);
@@ -216,19 +223,20 @@ inline __attribute__((always_inline)) bool block_moller_trumbore(const TriangleB
   const __m128 qy = _mm_sub_ps(_mm_mul_ps(tz, e1x), _mm_mul_ps(tx, e1z));
   const __m128 qz = _mm_sub_ps(_mm_mul_ps(tx, e1y), _mm_mul_ps(ty, e1x));
   const __m128 vv = _mm_xor_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, qx), _mm_mul_ps(dy, qy)), _mm_mul_ps(dz, qz)), sign);
-  const __m128 tt = _mm_xor_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(e2x, qx), _mm_mul_ps(e2y, qy)), _mm_mul_ps(e2z, qz)), sign);
   const __m128 zero = _mm_setzero_ps();
   __m128 ok = _mm_and_ps(_mm_cmpneq_ps(det, zero), _mm_cmpge_ps(uu, zero));
   ok = _mm_and_ps(ok, _mm_cmpge_ps(vv, zero));
   ok = _mm_and_ps(ok, _mm_cmple_ps(_mm_add_ps(uu, vv), adet));
-  ok = _mm_and_ps(ok, _mm_cmple_ps(tt, _mm_mul_ps(adet, _mm_set1_ps(best.t * (1.0f + 0x1p-20f)))));
   if (_mm_movemask_ps(ok) == 0) return false;
-  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), adet);
-  const __m128 t = _mm_mul_ps(tt, inv);
+  const __m128 inv = _mm_xor_ps(_mm_div_ps(_mm_set1_ps(1.0f), adet), sign);
+  const __m128 ts = _mm_add_ps(_mm_add_ps(_mm_mul_ps(e2x, _mm_mul_ps(qx, inv)), _mm_mul_ps(e2y, _mm_mul_ps(qy, inv))),
+                               _mm_mul_ps(e2z, _mm_mul_ps(qz, inv)));
+  const __m128 t = _mm_mul_ps(ts, _mm_set1_ps(r.t_scale));
   ok = _mm_and_ps(ok, _mm_cmpge_ps(t, _mm_set1_ps(r.tmin)));
   ok = _mm_and_ps(ok, _mm_cmple_ps(t, _mm_set1_ps(best.t)));
   const uint32_t mask = uint32_t(_mm_movemask_ps(ok));
-  return mask != 0 && offer_lanes(mask, t, _mm_mul_ps(uu, inv), _mm_mul_ps(vv, inv), b.id, best);
+  const __m128 ainv = _mm_xor_ps(inv, sign);
+  return mask != 0 && offer_lanes(mask, t, _mm_mul_ps(uu, ainv), _mm_mul_ps(vv, ainv), b.id, best);
 }
 
 // Woop et al.'s watertight test with the operation order of the scalar one in traversal.cpp,
@@ -272,14 +280,16 @@ inline bool block_watertight(const TriangleBlock& b, const KernelRay& r, BestHit
   const __m128 det = _mm_add_ps(_mm_add_ps(U, V), W);
   __m128 ok = _mm_andnot_ps(_mm_and_ps(neg, pos), _mm_cmpneq_ps(det, zero));
   if (_mm_movemask_ps(ok) == 0) return false;
-  const __m128 T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, _mm_mul_ps(sz, az)), _mm_mul_ps(V, _mm_mul_ps(sz, bz))),
-                              _mm_mul_ps(W, _mm_mul_ps(sz, cz)));
+  // The distance from the normalized barycentrics, as in the scalar test (no cube of the
+  // scene's scale to overflow).
   const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), det);
-  const __m128 t = _mm_mul_ps(T, inv);
+  const __m128 u = _mm_mul_ps(U, inv), v = _mm_mul_ps(V, inv), w = _mm_mul_ps(W, inv);
+  const __m128 t = _mm_add_ps(_mm_add_ps(_mm_mul_ps(u, _mm_mul_ps(sz, az)), _mm_mul_ps(v, _mm_mul_ps(sz, bz))),
+                              _mm_mul_ps(w, _mm_mul_ps(sz, cz)));
   ok = _mm_and_ps(ok, _mm_cmpge_ps(t, _mm_set1_ps(r.tmin)));
   ok = _mm_and_ps(ok, _mm_cmple_ps(t, _mm_set1_ps(best.t)));
   const uint32_t mask = uint32_t(_mm_movemask_ps(ok));
-  return mask != 0 && offer_lanes(mask, t, _mm_mul_ps(V, inv), _mm_mul_ps(W, inv), b.id, best);
+  return mask != 0 && offer_lanes(mask, t, v, w, b.id, best);
 }
 
 // ---- Traversal. -----------------------------------------------------------------------------

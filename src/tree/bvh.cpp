@@ -1,8 +1,17 @@
 #include "bvhopt/bvh.h"
 
+#include <string>
 #include <utility>
 
+#include "bvhopt/error.h"
+
 namespace bvhopt {
+
+void check_reference_count(size_t n, const char* who) {
+  if (n > kMaxReferences)
+    throw Error(std::string(who) + ": " + std::to_string(n) + " references, more than the 2^30 (" +
+                std::to_string(kMaxReferences) + ") a tree can hold");
+}
 
 void Bvh::refit_upwards(uint32_t node, RefitScope scope, double* inner_area_sum) {
   for (uint32_t n = node; n != kInvalidNode; n = nodes[n].parent) {
@@ -10,9 +19,9 @@ void Bvh::refit_upwards(uint32_t node, RefitScope scope, double* inner_area_sum)
     if (nd.is_leaf()) continue;
     const Box b = merge(nodes[nd.left()].box, nodes[nd.right()].box);
     if (scope == RefitScope::until_unchanged && b == nd.box) return;
-    const float old_area = nd.area;
+    const double old_area = nd.area();
     nd.set_box(b);
-    if (inner_area_sum) *inner_area_sum += static_cast<double>(nd.area) - old_area;
+    if (inner_area_sum) *inner_area_sum += nd.area() - old_area;
   }
 }
 

@@ -20,4 +20,12 @@ Hit brute_force_closest_mt(const Mesh& mesh, const Ray& ray);
 // t < hit.t.
 bool intersect_triangle_mt(const Ray& ray, const Triangle& tri, Hit& hit);
 
+// The independent oracle: every triangle through a test of its own, in double precision
+// (Moller-Trumbore on the float inputs widened to double; no code shared with the tracers'
+// float tests), so a fault in those tests, such as a float overflow at large coordinates,
+// cannot hide behind an oracle that shares it. It can differ from the tracers only for rays
+// within rounding of a triangle's edge or plane; tests compare it with a small tolerance.
+// Ties in t keep the lowest triangle id; t is rounded to float in the result.
+Hit brute_force_closest_double(const Mesh& mesh, const Ray& ray);
+
 }  // namespace bvhopt
