@@ -123,11 +123,9 @@ void ProgramTest::TearDown() {
   if (!dir_.empty()) std::filesystem::remove_all(dir_);
 }
 
-ProgramTest::Result ProgramTest::run(const std::string& args) { return run_program(exe_, args); }
-
-ProgramTest::Result ProgramTest::run_program(const std::filesystem::path& program, const std::string& args) {
+ProgramTest::Result ProgramTest::run(const std::string& args) {
   const std::filesystem::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-  const std::string cmd = program.string() + " " + args + " >" + out.string() + " 2>" + err.string() + " </dev/null";
+  const std::string cmd = exe_.string() + " " + args + " >" + out.string() + " 2>" + err.string() + " </dev/null";
   const int status = std::system(cmd.c_str());
   return {WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status), read_text(out), read_text(err)};
 }

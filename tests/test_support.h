@@ -49,8 +49,6 @@ class ProgramTest : public ::testing::Test {
   void TearDown() override;
   // Runs `bvhopt ARGS` through the shell (ARGS may quote), with no standard input.
   Result run(const std::string& args);
-  // The same for another program.
-  Result run_program(const std::filesystem::path& program, const std::string& args);
 
   std::filesystem::path exe_, dir_;
 };

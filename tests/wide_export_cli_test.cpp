@@ -9,6 +9,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include <sys/wait.h>
+
 #include "test_support.h"
 
 namespace fs = std::filesystem;
@@ -56,6 +58,15 @@ class WideExportCli : public bvhopt::testing::ProgramTest {
       EXPECT_TRUE(got == want) << layout << " " << format << " " << rays << ": the reader's hits differ";
     }
     EXPECT_TRUE(some_miss);
+  }
+
+  // Runs the reader, as ProgramTest::run runs bvhopt.
+  Result run_program(const fs::path& program, const std::string& args) {
+    const fs::path out = dir_ / "reader-out.txt", err = dir_ / "reader-err.txt";
+    const std::string cmd = program.string() + " " + args + " >" + out.string() + " 2>" + err.string() + " </dev/null";
+    const int status = std::system(cmd.c_str());
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status), bvhopt::testing::read_text(out),
+            bvhopt::testing::read_text(err)};
   }
 
   fs::path rays_file(const std::string& kind) const { return dir_ / (kind + ".rays"); }

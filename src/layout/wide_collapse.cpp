@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -92,7 +93,18 @@ std::vector<uint8_t> distinct_counts(const FlatBvh& bvh, uint32_t limit) {
 // Builds the output structure from a function giving each wide node's children.
 class CollapseWriter {
  public:
-  CollapseWriter(const FlatBvh& bvh, uint32_t width) : bvh_(bvh) { out_.width = width; }
+  // Reserved to their bounds (pages never written are never touched): no regrowth copies.
+  CollapseWriter(const FlatBvh& bvh, uint32_t width) : bvh_(bvh) {
+    out_.width = width;
+    const size_t leaves = (bvh.nodes.size() + 1) / 2;
+    out_.nodes.reserve(leaves);
+    out_.child_begin.reserve(leaves + 1);
+    out_.children.reserve(bvh.nodes.size());
+    out_.child_is_leaf.reserve(bvh.nodes.size());
+    out_.child_index.reserve(bvh.nodes.size());
+    out_.leaf_begin.reserve(leaves + 1);
+    out_.leaf_triangles.reserve(bvh.triangle_ids.size());
+  }
 
   // `children_of(flat, out)` appends the flat nodes that become the wide node's children;
   // `is_leaf(flat)` says which of them are leaves. Depth-first, children in the order given.
@@ -155,8 +167,9 @@ class CollapseWriter {
 class OptimalCollapse {
  public:
   OptimalCollapse(const FlatBvh& bvh, const CollapseOptions& o)
-      : bvh_(bvh), width_(o.width), choice_(bvh.nodes.size() * o.width), internal_split_(bvh.nodes.size()),
-        leaf_(bvh.nodes.size()) {
+      : bvh_(bvh), width_(o.width), choice_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size() * o.width)),
+        internal_split_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size())),
+        leaf_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size())) {
     const std::vector<uint8_t> distinct = distinct_counts(bvh, o.max_leaf_triangles);
     const uint32_t n = uint32_t(bvh.nodes.size());
     const uint32_t w = width_;
@@ -237,9 +250,10 @@ class OptimalCollapse {
 
   const FlatBvh& bvh_;
   uint32_t width_;
-  std::vector<uint8_t> choice_;
-  std::vector<uint8_t> internal_split_;
-  std::vector<uint8_t> leaf_;
+  // Every entry is written before it is read (so not cleared first).
+  std::unique_ptr<uint8_t[]> choice_;
+  std::unique_ptr<uint8_t[]> internal_split_;
+  std::unique_ptr<uint8_t[]> leaf_;
 };
 
 // Greedy widening: open the inner child of largest area until the slots are full.
