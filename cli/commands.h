@@ -12,6 +12,7 @@ void register_bake_command(CLI::App& app);        // build + optimize + collapse
 void register_compact_command(CLI::App& app);     // finalize
 void register_stats_command(CLI::App& app);       // measure
 void register_trace_command(CLI::App& app);       // trace
+void register_export_command(CLI::App& app);      // layout, written for renderers
 void register_render_command(CLI::App& app);
 void register_demo_command(CLI::App& app);        // all of it on the built-in scene
 void register_experiment_command(CLI::App& app);  // the papers' tables and figures

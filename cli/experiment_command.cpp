@@ -12,6 +12,7 @@
 #include "experiment/experiment.h"
 #include "cli_common.h"
 #include "commands.h"
+#include "trace_common.h"
 
 namespace bvhopt::cli {
 namespace {
@@ -29,6 +30,7 @@ struct ExperimentOptions {
   bool quick = false;
   std::string plot_script;
   ThreadsOption threads;
+  LayoutOption layout;
   std::vector<std::string> merge_dirs;
   std::string merge_out;
 };
@@ -107,6 +109,7 @@ ExperimentConfig experiment_config(const ExperimentOptions& opt, bool budget_giv
   for (const std::string& s : opt.scenes) config.scenes.push_back(s);
   if (config.scenes.empty()) throw Error("experiment: give --scenes DIR or --scene FILE");
   config.seed = opt.seed;
+  config.layout = opt.layout.layout();
   config.rays = opt.rays;
   if (opt.quick) config = quick_experiment_config(config);
   if (budget_given || !opt.quick) config.time_budget = opt.time_budget;
@@ -164,6 +167,7 @@ void register_experiment_command(CLI::App& app) {
       ->type_name("I/N");
   cmd->add_flag("--quick", opt->quick, "Small settings for a trial run: 20k rays, 4 frames, t in {10, 14}, 10 s budget");
   cmd->add_option("--plot-script", opt->plot_script, "The plotting script (default: scripts/plot_experiment.py found beside the program)");
+  opt->layout.add_to(cmd);
   opt->threads.add_to(cmd);
 
   CLI::App* merge = cmd->add_subcommand("merge", "Join the output folders of the shards of one run into one report");

@@ -40,6 +40,7 @@ int main(int argc, char** argv) {
   bvhopt::cli::register_compact_command(app);
   bvhopt::cli::register_stats_command(app);
   bvhopt::cli::register_trace_command(app);
+  bvhopt::cli::register_export_command(app);
   bvhopt::cli::register_render_command(app);
   bvhopt::cli::register_demo_command(app);
   bvhopt::cli::register_experiment_command(app);

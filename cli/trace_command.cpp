@@ -1,12 +1,14 @@
 // bvhopt trace: trace a ray set through a BVH file and report speed and work per ray.
 #include <tbb/info.h>
 
+#include <cstdio>
 #include <iostream>
 #include <optional>
 
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/ray_file.h"
+#include "bvhopt/atomic_file.h"
 #include "cli_common.h"
 #include "commands.h"
 #include "trace_common.h"
@@ -42,7 +44,7 @@ struct TraceOptions {
   uint64_t count = 0;
   uint64_t seed = 1;
   bool json = false;
-  std::string save_rays, load_rays;
+  std::string save_rays, load_rays, save_hits;
   std::string order = "axis";
   uint64_t check = 1000;
   int repeats = 3;
@@ -131,6 +133,33 @@ void print_trace_text(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
               << "\n";
 }
 
+// One line per ray (docs/wide-export-format.md, "Hit files"): for closest-hit rays the
+// triangle id and t, u, v as hexadecimal floats (exact), or "miss"; for any-hit rays "hit" or
+// "miss". Readers of exported trees write the same lines, so equal files mean equal hits.
+void save_hits(const std::string& path, const AnyTracer& traced, const RaySet& set) {
+  std::vector<Hit> hits(set.query == RayQuery::closest ? set.rays.size() : 0);
+  std::vector<uint8_t> any(set.query == RayQuery::any ? set.rays.size() : 0);
+  TraceCounters counters;
+  if (set.query == RayQuery::closest)
+    traced.closest(set.rays.data(), set.rays.size(), hits.data(), counters);
+  else
+    traced.any(set.rays.data(), set.rays.size(), any.data(), counters);
+  std::string text;
+  char line[128];
+  for (size_t i = 0; i < set.rays.size(); ++i) {
+    if (set.query == RayQuery::any) {
+      text += any[i] ? "hit\n" : "miss\n";
+    } else if (!hits[i].hit()) {
+      text += "miss\n";
+    } else {
+      std::snprintf(line, sizeof line, "%u %a %a %a\n", hits[i].triangle_id, double(hits[i].t), double(hits[i].u),
+                    double(hits[i].v));
+      text += line;
+    }
+  }
+  write_text_atomically(path, text);
+}
+
 // Loads the tree and the rays, times them on one thread and on all, checks a sample against
 // brute force, and reports; throws Error when traversal and brute force disagree.
 void run_trace(const TraceOptions& opt) {
@@ -146,6 +175,10 @@ void run_trace(const TraceOptions& opt) {
   TraceResults r;
   r.set = trace_ray_set(opt, mesh, *tree.tracer);
   const RaySet& set = r.set;
+  if (!opt.save_hits.empty()) {
+    progress.update("saving the hits of " + std::to_string(set.rays.size()) + " rays", true);
+    save_hits(opt.save_hits, traced, set);
+  }
 
   progress.update("tracing " + std::to_string(set.rays.size()) + " rays on 1 thread", true);
   MeasureOptions one;
@@ -193,6 +226,9 @@ void register_trace_command(CLI::App& app) {
   cmd->add_option("--check", opt->check, "Rays checked against brute force (0: none)")->capture_default_str();
   cmd->add_option("--repeats", opt->repeats, "Timed passes (median reported)")->check(CLI::Range(1, 100))->capture_default_str();
   cmd->add_option("--save-rays", opt->save_rays, "Write the ray set to this ray file")->type_name("FILE");
+  cmd->add_option("--save-hits", opt->save_hits,
+                  "Write each ray's hit (triangle id and t, u, v as hex floats, or miss) to this text file")
+      ->type_name("FILE");
   cmd->add_option("--load-rays", opt->load_rays, "Trace the rays of this ray file instead of generating them")
       ->type_name("FILE");
   opt->camera.add_to(cmd);

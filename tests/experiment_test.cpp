@@ -119,6 +119,8 @@ TEST_F(ExperimentRun, WritesEveryOutput) {
   nlohmann::json r = nlohmann::json::parse(read_text(*whole_ / "results.json"));
   EXPECT_EQ(r["tasks"].size(), 5u);  // 2 scenes x (optimizers, evh) + rotation
   EXPECT_GT(r["machine"]["cores"].get<int>(), 0);
+  EXPECT_EQ(r["settings"]["layout"], "bvh8");  // the default: the fastest layout
+  EXPECT_NE(report.find("in the bvh8 layout"), std::string::npos);
 }
 
 TEST_F(ExperimentRun, KenslerTableInRange) {
@@ -311,6 +313,22 @@ TEST(Experiment, CommandLineRuns) {
                           (out / "run").string() + "' > '" + (out / "log.txt").string() + "' 2>&1";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << read_text(out / "log.txt");
   EXPECT_TRUE(fs::exists(out / "run" / "report.md"));
+  // --layout: recorded in the settings and the report, and the rays really go through it
+  // (a 4-wide tree takes fewer traversal steps than the binary one on the same rays).
+  auto sah_steps = [&](const std::string& layout) {
+    const fs::path dir = out / layout;
+    const std::string run = "'" + exe + "' experiment --scene 'builtin?triangles=800' --quick --rays 2000 --out '" +
+                            dir.string() + "' --layout " + layout + " > '" + (out / "log.txt").string() + "' 2>&1";
+    EXPECT_EQ(std::system(run.c_str()), 0) << read_text(out / "log.txt");
+    const nlohmann::json r = nlohmann::json::parse(read_text(dir / "results.json"));
+    EXPECT_EQ(r["settings"]["layout"], layout);
+    EXPECT_NE(read_text(dir / "report.md").find("in the " + layout + " layout"), std::string::npos);
+    for (const auto& task : r["tasks"])
+      if (task.contains("det") && task["det"].contains("trees")) return task["det"]["trees"]["sah"]["steps"]["primary"].get<double>();
+    ADD_FAILURE() << "no traced trees in " << dir;
+    return 0.0;
+  };
+  EXPECT_LT(sah_steps("bvh4"), 0.8 * sah_steps("bvh2"));
   const std::string bad = "'" + exe + "' experiment --scene 'builtin?triangles=800' --shard 3/2 --out '" +
                           (out / "bad").string() + "' > '" + (out / "bad.txt").string() + "' 2>&1";
   EXPECT_NE(std::system(bad.c_str()), 0);

@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "bvhopt/any_tracer.h"
+
 namespace bvhopt {
 
 // What the runner tells its caller after every step, for a progress line.
@@ -47,6 +49,9 @@ struct ExperimentConfig {
   uint64_t evh_rays = 300'000;
   // Timed passes per ray measurement (median reported).
   int repeats = 3;
+  // The layout every ray measurement traces the trees in (the default: the fastest measured,
+  // see any_tracer.h). Heat maps always show the binary tree's traversal steps.
+  TraceLayout layout = kDefaultTraceLayout;
   // Figure 4's sweep of t (subdivision threshold exponent); Figure 5's frame count and t.
   std::vector<int> evh_t_values = {8, 10, 12, 14, 16, 18, 20};
   uint32_t rotation_frames = 64;

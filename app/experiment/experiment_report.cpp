@@ -410,7 +410,8 @@ void write_report(const json& results, const ReportTables& t, const fs::path& ou
     << " timed passes per measurement (median), EVH rays " << s["evh_rays"] << ", t values " << s["evh_t_values"].dump()
     << ", " << s["rotation_frames"] << " rotation frames at t = " << s["rotation_t"] << ", cost model c_T = "
     << s["cost_model"]["c_T"] << ", c_I = " << s["cost_model"]["c_I"] << ". Ray times are traced on each tree "
-    << "compacted to leaves of up to " << s["traced_leaf_size"] << " triangles (the same for every method); "
+    << "compacted to leaves of up to " << s["traced_leaf_size"] << " triangles (the same for every method) in the "
+    << (s.contains("layout") ? s["layout"].get<std::string>() : std::string("bvh2")) << " layout; "
     << "times are seconds for the whole ray set, on all threads.\n\n";
   r << "Costs, reference counts, traversal steps and per-pass costs are deterministic (the same on any machine, "
        "thread count and shard split); times are not. `results.json` keeps them apart (`det` and `timing`).\n\n";

@@ -27,6 +27,7 @@
 #include "bvhopt/stats.h"
 #include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
+#include "bvhopt/wide_tracer.h"
 #include "experiment/experiment_internal.h"
 
 namespace bvhopt {
@@ -133,6 +134,7 @@ json settings_json(const ExperimentConfig& c) {
               {"heatmap_width", c.heatmap_width},
               {"heatmap_height", c.heatmap_height},
               {"traced_leaf_size", kTracedLeafSize},
+              {"layout", std::string(trace_layout_name(c.layout))},
               {"evh_leaf_size", kEvhLeafSize},
               {"cost_model", {{"c_T", CostModel{}.traversal}, {"c_I", CostModel{}.intersection}}}};
 }
@@ -197,12 +199,23 @@ struct RaySets {
 const RayKind kTableRayKinds[] = {RayKind::primary, RayKind::random, RayKind::ao, RayKind::path};
 
 // A tree made ready for tracing: compacted to leaves of up to kTracedLeafSize references.
-Tracer make_tracer(const Bvh& bvh, const PrimitiveRefs& refs, const Mesh& mesh) {
+FlatBvh traced_flat(const Bvh& bvh, const PrimitiveRefs& refs) {
   Bvh copy = bvh;
   CollapseConfig cc;
   cc.max_leaf_size = kTracedLeafSize;
   collapse_leaves(copy, cc);
-  return Tracer(finalize(copy, refs), mesh);
+  return finalize(copy, refs);
+}
+Tracer make_tracer(const Bvh& bvh, const PrimitiveRefs& refs, const Mesh& mesh) {
+  return Tracer(traced_flat(bvh, refs), mesh);
+}
+
+// The wide tracer of a layout (none for bvh2).
+std::unique_ptr<WideTracer> make_wide(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout) {
+  if (layout == TraceLayout::bvh2) return nullptr;
+  WideTracerOptions o;
+  o.layout.collapse.width = uint32_t(layout);
+  return std::make_unique<WideTracer>(flat, mesh, o);
 }
 
 // Every tree of a scene traced on the same ray sets. Deterministic figures (traversal steps,
@@ -212,7 +225,12 @@ Tracer make_tracer(const Bvh& bvh, const PrimitiveRefs& refs, const Mesh& mesh) 
 // `repeats` passes (the first taken by measure_rays right after its untimed pass).
 struct TracedTree {
   std::string key;
-  Tracer tracer;
+  Tracer tracer;                     // binary: heat maps
+  std::unique_ptr<WideTracer> wide;  // the configured wide layout: ray measurements
+
+  TracedTree(std::string k, const FlatBvh& flat, const Mesh& mesh, TraceLayout layout)
+      : key(std::move(k)), tracer(flat, mesh), wide(make_wide(flat, mesh, layout)) {}
+  AnyTracer traced() const { return wide ? AnyTracer(*wide) : AnyTracer(tracer); }
 };
 void measure_trees(Runner& run, const std::vector<TracedTree>& trees, const RaySets& rays, json& det_trees,
                    json& timing_trees) {
@@ -226,7 +244,7 @@ void measure_trees(Runner& run, const std::vector<TracedTree>& trees, const RayS
       const RaySet& set = rays.sets[k];
       const std::string kind(ray_kind_name(set.kind));
       run.step(trees[t].key + ": rays " + kind, 0.85);
-      RayMeasurement m = measure_rays(trees[t].tracer, set.rays, set.query, mo);
+      RayMeasurement m = measure_rays(trees[t].traced(), set.rays, set.query, mo);
       json& d = det_trees[trees[t].key];
       d["steps"][kind] = m.steps.mean;
       d["triangle_tests"][kind] = m.triangle_tests.mean;
@@ -241,7 +259,7 @@ void measure_trees(Runner& run, const std::vector<TracedTree>& trees, const RayS
       for (size_t k = 0; k < sets; ++k) {
         const RaySet& set = rays.sets[k];
         const auto t0 = Clock::now();
-        trace_rays(trees[t].tracer, set.rays, set.query, hits);
+        trace_rays(trees[t].traced(), set.rays, set.query, hits);
         samples[t * sets + k].push_back(seconds_since(t0));
       }
     }
@@ -437,10 +455,11 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
   std::string best_key = "sah";
   double best_cost = trees["sah"]["cost"].get<double>();
   std::vector<TracedTree> traced;
-  traced.push_back({"sah", make_tracer(sah, refs, mesh)});
-  traced.push_back({"median", make_tracer(median, refs, mesh)});
+  const TraceLayout layout = run.config().layout;
+  traced.emplace_back("sah", traced_flat(sah, refs), mesh, layout);
+  traced.emplace_back("median", traced_flat(median, refs), mesh, layout);
   for (auto& [key, tree] : optimized.trees) {
-    traced.push_back({key, make_tracer(tree, refs, mesh)});
+    traced.emplace_back(key, traced_flat(tree, refs), mesh, layout);
     const double c = trees[key]["cost"].get<double>();
     if (c < best_cost) {
       best_cost = c;
@@ -467,16 +486,18 @@ struct EvhTrace {
 };
 
 // Builds over `refs` (binned SAH), dedups the pieces of one triangle per leaf, traces `rays`.
-EvhTrace trace_evh_tree(const Mesh& mesh, const PrimitiveRefs& refs, const RaySet& rays, int repeats) {
+EvhTrace trace_evh_tree(const Mesh& mesh, const PrimitiveRefs& refs, const RaySet& rays, const ExperimentConfig& cfg) {
   BuildOptions bo;
   bo.kind = BuilderKind::binned_sah;
   bo.leaf.max_leaf_size = kEvhLeafSize;
   Bvh bvh = build_bvh(refs, bo);
   dedup_leaf_references(bvh, refs);
-  Tracer tracer(finalize(bvh, refs), mesh);
+  const FlatBvh flat = finalize(bvh, refs);
+  const Tracer tracer(flat, mesh);
+  const std::unique_ptr<WideTracer> wide = make_wide(flat, mesh, cfg.layout);
   MeasureOptions mo;
-  mo.repeats = std::max(1, repeats);
-  RayMeasurement m = measure_rays(tracer, rays.rays, rays.query, mo);
+  mo.repeats = std::max(1, cfg.repeats);
+  RayMeasurement m = measure_rays(wide ? AnyTracer(*wide) : AnyTracer(tracer), rays.rays, rays.query, mo);
   EvhTrace r;
   r.steps = m.steps.mean;
   r.seconds = m.seconds;
@@ -519,7 +540,7 @@ json run_evh(Runner& run, const Mesh& mesh) {
   run.step("EVH rays", 0.05);
   const RaySet rays = evh_primary_rays(mesh, cfg);
   det["rays"] = rays.rays.size();
-  EvhTrace off = trace_evh_tree(mesh, make_references(mesh), rays, cfg.repeats);
+  EvhTrace off = trace_evh_tree(mesh, make_references(mesh), rays, cfg);
   det["off"] = {{"references", off.references}, {"steps", off.steps}};
   timing["off_seconds"] = off.seconds;
   det["sweep"] = json::array();
@@ -530,7 +551,7 @@ json run_evh(Runner& run, const Mesh& mesh) {
     EdgeVolumeConfig ec;
     ec.t = t;
     EdgeVolumeResult sub = subdivide_edge_volume(mesh, ec);
-    EvhTrace r = trace_evh_tree(mesh, sub.refs, rays, cfg.repeats);
+    EvhTrace r = trace_evh_tree(mesh, sub.refs, rays, cfg);
     det["sweep"].push_back({{"t", t},
                             {"effective_t", sub.stats.effective_t},
                             {"references", r.references},
@@ -581,11 +602,11 @@ json run_rotation(Runner& run, const Mesh& mesh) {
     Mesh m = mesh;
     rotate_mesh(m, Vec3{angle[0], angle[1], angle[2]});
     const RaySet rays = evh_primary_rays(m, cfg, camera, tracer0);
-    EvhTrace base = trace_evh_tree(m, make_references(m), rays, cfg.repeats);
+    EvhTrace base = trace_evh_tree(m, make_references(m), rays, cfg);
     EdgeVolumeConfig ec;
     ec.t = cfg.rotation_t;
     EdgeVolumeResult sub = subdivide_edge_volume(m, ec);
-    EvhTrace evh = trace_evh_tree(m, sub.refs, rays, cfg.repeats);
+    EvhTrace evh = trace_evh_tree(m, sub.refs, rays, cfg);
     det["frames"].push_back({{"frame", f},
                              {"angles", {angle[0], angle[1], angle[2]}},
                              {"base_references", base.references},

@@ -10,24 +10,18 @@
 
 #include "bvhopt/atomic_file.h"
 #include "bvhopt/error.h"
+#include "io/fnv1a.h"
 
 namespace bvhopt {
 namespace {
 
 static_assert(std::endian::native == std::endian::little, "ray files are little-endian; add byte swapping");
 
-uint64_t fnv1a(uint64_t h, const void* data, size_t n) {
-  const auto* p = static_cast<const unsigned char*>(data);
-  for (size_t i = 0; i < n; ++i) {
-    h ^= p[i];
-    h *= 0x100000001B3ull;
-  }
-  return h;
-}
+using detail::fnv1a;
+using detail::kFnvBasis;
 
 constexpr char kMagic[8] = {'B', 'V', 'H', 'O', 'R', 'A', 'Y', 'S'};
 constexpr size_t kHeaderSize = 64;
-constexpr uint64_t kFnvBasis = 0xCBF29CE484222325ull;
 
 struct Header {
   char magic[8];

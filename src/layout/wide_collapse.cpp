@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -21,43 +22,88 @@ uint32_t right_of(const FlatBvh& bvh, uint32_t n) { return bvh.nodes[n].index; }
 
 uint32_t blocks_for(uint32_t triangles) { return (triangles + 3) / 4; }
 
-// The distinct triangles under every node whose subtree holds at most `limit` of them
-// (kNoSet above), bottom-up by merging the children's sorted sets; binary leaves always get
-// theirs, whatever their size, since they cannot be split.
-struct DistinctSets {
-  std::vector<uint32_t> begin, size;  // per flat node; size kNoSet: more than the limit
-  std::vector<uint32_t> pool;
-
-  DistinctSets(const FlatBvh& bvh, uint32_t limit) : begin(bvh.nodes.size(), 0), size(bvh.nodes.size(), kNoSet) {
-    std::vector<uint32_t> merged;
-    for (size_t i = bvh.nodes.size(); i-- > 0;) {
-      const FlatNode& f = bvh.nodes[i];
-      merged.clear();
-      if (f.is_leaf()) {
-        merged.assign(bvh.triangle_ids.begin() + f.index, bvh.triangle_ids.begin() + f.index + f.count);
-        std::sort(merged.begin(), merged.end());
-        merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
-      } else {
-        const uint32_t l = left_of(uint32_t(i)), r = right_of(bvh, uint32_t(i));
-        if (size[l] == kNoSet || size[r] == kNoSet || size[l] > limit || size[r] > limit) continue;
-        std::set_union(pool.begin() + begin[l], pool.begin() + begin[l] + size[l], pool.begin() + begin[r],
-                       pool.begin() + begin[r] + size[r], std::back_inserter(merged));
-        if (merged.size() > limit) continue;
-      }
-      begin[i] = uint32_t(pool.size());
-      size[i] = uint32_t(merged.size());
-      pool.insert(pool.end(), merged.begin(), merged.end());
+// The distinct triangles under flat node n, ascending (every leaf entry of its subtree,
+// duplicates from edge volume subdivision merged).
+// `todo` is scratch space, kept by the caller across calls.
+void distinct_triangles(const FlatBvh& bvh, uint32_t n, std::vector<uint32_t>& out, std::vector<uint32_t>& todo) {
+  out.clear();
+  todo.assign(1, n);
+  while (!todo.empty()) {
+    const FlatNode& f = bvh.nodes[todo.back()];
+    const uint32_t i = todo.back();
+    todo.pop_back();
+    if (f.is_leaf()) {
+      out.insert(out.end(), bvh.triangle_ids.begin() + f.index, bvh.triangle_ids.begin() + f.index + f.count);
+    } else {
+      todo.push_back(right_of(bvh, i));
+      todo.push_back(left_of(i));
     }
   }
-  // Distinct triangle count when known (binary leaves and small subtrees).
-  bool known(uint32_t n) const { return size[n] != kNoSet; }
-};
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+}
+
+// Per flat node, the number of distinct triangles under it when at most `limit` (binary
+// leaves: always, up to kSaturated - 1), else kSaturated. Computed bottom-up by merging the
+// children's sorted sets; only the sets of the path being walked are kept (a stack: in
+// reverse depth-first order a node's two children are the top two entries), so the memory
+// is the tree's depth times the limit, not a set per node.
+constexpr uint8_t kSaturated = 0xff;
+
+std::vector<uint8_t> distinct_counts(const FlatBvh& bvh, uint32_t limit) {
+  std::vector<uint8_t> count(bvh.nodes.size(), kSaturated);
+  struct Entry {
+    size_t begin;  // in pool
+    uint32_t size;
+    bool known;
+  };
+  std::vector<Entry> stack;
+  std::vector<uint32_t> pool, merged;
+  for (size_t i = bvh.nodes.size(); i-- > 0;) {
+    const FlatNode& f = bvh.nodes[i];
+    merged.clear();
+    bool known = true;
+    size_t base = pool.size();
+    if (f.is_leaf()) {
+      merged.assign(bvh.triangle_ids.begin() + f.index, bvh.triangle_ids.begin() + f.index + f.count);
+      std::sort(merged.begin(), merged.end());
+      merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+    } else {
+      const Entry l = stack.back();
+      stack.pop_back();
+      const Entry r = stack.back();
+      stack.pop_back();
+      base = r.begin;  // the right child's set lies below the left's
+      known = l.known && r.known && l.size <= limit && r.size <= limit;
+      if (known)
+        std::set_union(pool.begin() + l.begin, pool.begin() + l.begin + l.size, pool.begin() + r.begin,
+                       pool.begin() + r.begin + r.size, std::back_inserter(merged));
+      known = known && merged.size() <= limit;
+    }
+    pool.resize(base);
+    if (known) {
+      pool.insert(pool.end(), merged.begin(), merged.end());
+      count[i] = uint8_t(std::min<size_t>(merged.size(), kSaturated));
+    }
+    stack.push_back({base, known ? uint32_t(merged.size()) : 0, known});
+  }
+  return count;
+}
 
 // Builds the output structure from a function giving each wide node's children.
 class CollapseWriter {
  public:
-  CollapseWriter(const FlatBvh& bvh, const DistinctSets& sets, uint32_t width) : bvh_(bvh), sets_(sets) {
+  // Reserved to their bounds (pages never written are never touched): no regrowth copies.
+  CollapseWriter(const FlatBvh& bvh, uint32_t width) : bvh_(bvh) {
     out_.width = width;
+    const size_t leaves = (bvh.nodes.size() + 1) / 2;
+    out_.nodes.reserve(leaves);
+    out_.child_begin.reserve(leaves + 1);
+    out_.children.reserve(bvh.nodes.size());
+    out_.child_is_leaf.reserve(bvh.nodes.size());
+    out_.child_index.reserve(bvh.nodes.size());
+    out_.leaf_begin.reserve(leaves + 1);
+    out_.leaf_triangles.reserve(bvh.triangle_ids.size());
   }
 
   // `children_of(flat, out)` appends the flat nodes that become the wide node's children;
@@ -98,52 +144,58 @@ class CollapseWriter {
 
  private:
   uint32_t add_leaf(uint32_t flat) {
-    if (!sets_.known(flat)) throw Error("collapse: internal error, leaf without its triangle set");
-    const uint32_t n = sets_.size[flat];
+    distinct_triangles(bvh_, flat, set_, scratch_);
+    const size_t n = set_.size();
     if (n > kMaxLeafTriangles)
       throw Error("collapse: a leaf of " + std::to_string(n) + " distinct triangles; wide leaves hold at most " +
                   std::to_string(kMaxLeafTriangles) + " (build with a smaller leaf size)");
-    out_.leaf_triangles.insert(out_.leaf_triangles.end(), sets_.pool.begin() + sets_.begin[flat],
-                               sets_.pool.begin() + sets_.begin[flat] + n);
+    out_.leaf_triangles.insert(out_.leaf_triangles.end(), set_.begin(), set_.end());
     out_.leaf_begin.push_back(uint32_t(out_.leaf_triangles.size()));
     return uint32_t(out_.leaf_begin.size() - 2);
   }
 
   const FlatBvh& bvh_;
-  const DistinctSets& sets_;
+  std::vector<uint32_t> set_, scratch_;
   CollapsedBvh out_;
 };
 
-// The dynamic program. cost[n][i-1] = C(n, i), the least cost of the subtree of n as at
-// most i subtrees (each a leaf or a wide node); C(n, 1) = min(C_leaf, C_internal). Floats:
-// the argmins are what matters, and the final cost is re-evaluated in double.
+// The dynamic program. C(n, i), the least cost of the subtree of n as at most i subtrees
+// (each a leaf or a wide node); C(n, 1) = min(C_leaf, C_internal). Only the choices are
+// kept per node (a byte per i); the cost rows live on a stack, since each is read once, by
+// the parent, and in reverse depth-first order a node's children are the top two rows.
+// Floats: the argmins are what matters, and the final cost is re-evaluated in double.
 class OptimalCollapse {
  public:
-  OptimalCollapse(const FlatBvh& bvh, const DistinctSets& sets, const CollapseOptions& o)
-      : bvh_(bvh), width_(o.width), cost_(bvh.nodes.size() * o.width), choice_(bvh.nodes.size() * o.width),
-        internal_split_(bvh.nodes.size()), leaf_(bvh.nodes.size()) {
+  OptimalCollapse(const FlatBvh& bvh, const CollapseOptions& o)
+      : bvh_(bvh), width_(o.width), choice_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size() * o.width)),
+        internal_split_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size())),
+        leaf_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size())) {
+    const std::vector<uint8_t> distinct = distinct_counts(bvh, o.max_leaf_triangles);
     const uint32_t n = uint32_t(bvh.nodes.size());
     const uint32_t w = width_;
-    // Areas relative to the root's: the float table then holds the same numbers at every
+    // Areas relative to the root's: the float rows then hold the same numbers at every
     // scale of the scene (absolute areas overflow a float above extents of about 1e19).
     const double root_area = n ? bvh.nodes[0].box.area() : 0.0;
     const double per_area = root_area > 0.0 ? 1.0 / root_area : 1.0;
+    std::vector<float> rows;  // the stack, w floats per entry
+    float cl[kMaxWidth], cr[kMaxWidth], c[kMaxWidth];
     for (uint32_t i = n; i-- > 0;) {
       const FlatNode& f = bvh.nodes[i];
       const float area = float(f.box.area() * per_area);
-      float* c = &cost_[size_t(i) * w];
       uint8_t* ch = &choice_[size_t(i) * w];
       float leaf_cost = kInf;
-      if (sets.known(i) && (f.is_leaf() || sets.size[i] <= o.max_leaf_triangles))
-        leaf_cost = float(o.cost.block) * area * float(blocks_for(sets.size[i]));
+      if (distinct[i] != kSaturated && (f.is_leaf() || distinct[i] <= o.max_leaf_triangles))
+        leaf_cost = float(o.cost.block) * area * float(blocks_for(distinct[i]));
       if (f.is_leaf()) {
         std::fill(c, c + w, leaf_cost);
         std::fill(ch, ch + w, uint8_t(0));
         leaf_[i] = 1;
+        rows.insert(rows.end(), c, c + w);
         continue;
       }
-      const float* cl = &cost_[size_t(left_of(i)) * w];
-      const float* cr = &cost_[size_t(right_of(bvh, i)) * w];
+      std::copy(rows.end() - w, rows.end(), cl);
+      std::copy(rows.end() - 2 * w, rows.end() - w, cr);
+      rows.resize(rows.size() - 2 * w);
       // distribute(j): the best split of j slots over the two children, k to the left.
       auto distribute = [&](uint32_t j, uint8_t& best_k) {
         float best = kInf;
@@ -173,6 +225,7 @@ class OptimalCollapse {
           ch[j - 1] = 0;
         }
       }
+      rows.insert(rows.end(), c, c + w);
     }
   }
 
@@ -186,6 +239,8 @@ class OptimalCollapse {
   bool is_leaf(uint32_t n) const { return leaf_[n] != 0; }
 
  private:
+  static constexpr uint32_t kMaxWidth = 8;
+
   void gather(uint32_t n, uint32_t slots, std::vector<uint32_t>& out) const {
     while (slots > 1 && choice_[size_t(n) * width_ + slots - 1] == 0) --slots;
     if (slots == 1) {
@@ -199,10 +254,10 @@ class OptimalCollapse {
 
   const FlatBvh& bvh_;
   uint32_t width_;
-  std::vector<float> cost_;
-  std::vector<uint8_t> choice_;
-  std::vector<uint8_t> internal_split_;
-  std::vector<uint8_t> leaf_;
+  // Every entry is written before it is read (so not cleared first).
+  std::unique_ptr<uint8_t[]> choice_;
+  std::unique_ptr<uint8_t[]> internal_split_;
+  std::unique_ptr<uint8_t[]> leaf_;
 };
 
 // Greedy widening: open the inner child of largest area until the slots are full.
@@ -233,8 +288,7 @@ CollapsedBvh collapse_to_wide(const FlatBvh& bvh, const CollapseOptions& options
     throw Error("collapse: width " + std::to_string(options.width) + " (4 or 8)");
   if (bvh.nodes.empty()) throw Error("collapse: the tree has no nodes");
   const uint32_t limit = std::min(options.max_leaf_triangles, kMaxLeafTriangles);
-  const DistinctSets sets(bvh, limit);
-  CollapseWriter writer(bvh, sets, options.width);
+  CollapseWriter writer(bvh, options.width);
   CollapsedBvh out;
   if (options.method == CollapseMethod::greedy) {
     out = writer.write([&](uint32_t n, std::vector<uint32_t>& kids) { greedy_children(bvh, n, options.width, kids); },
@@ -242,7 +296,7 @@ CollapsedBvh collapse_to_wide(const FlatBvh& bvh, const CollapseOptions& options
   } else {
     CollapseOptions o = options;
     o.max_leaf_triangles = limit;
-    const OptimalCollapse dp(bvh, sets, o);
+    const OptimalCollapse dp(bvh, o);
     out = writer.write([&](uint32_t n, std::vector<uint32_t>& kids) { dp.children_of(n, kids); },
                        [&](uint32_t n) { return dp.is_leaf(n); });
   }

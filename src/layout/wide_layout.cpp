@@ -1,6 +1,8 @@
 // The wide layout: collapsed nodes written depth-first into one aligned arena, each node
 // followed by its leaf blocks, so a node and the triangles it points to share pages.
 #include <sys/mman.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
@@ -8,7 +10,9 @@
 #include <cstring>
 #include <cmath>
 #include <limits>
+#include <new>
 #include <string>
+#include <vector>
 
 #include "bvhopt/error.h"
 #include "bvhopt/wide_bvh.h"
@@ -28,43 +32,21 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// The arena as it is written: 32-byte units, nodes on 64-byte boundaries, in one block of
-// the size the collapse implies (an upper bound, computed before writing). Arenas of 2 MiB
-// or more are 2 MiB aligned and asked to be backed by huge pages: incoherent rays touch
-// nodes all over the arena, and with 4 KiB pages most node visits would also miss the TLB
-// (Embree allocates its BVH the same way).
-class ArenaWriter {
- public:
-  explicit ArenaWriter(size_t capacity) : capacity_((capacity + 63) / 64 * 64) {
-    constexpr size_t kHuge = size_t(2) << 20;
-    void* p = nullptr;
-    if (posix_memalign(&p, capacity_ >= kHuge ? kHuge : 64, std::max<size_t>(capacity_, 64)) != 0)
-      throw Error("wide layout: out of memory for " + std::to_string(capacity_) + " bytes");
+// The arena: one block of exactly the layout's size, 64-byte aligned. Arenas of 2 MiB or
+// more are 2 MiB aligned and asked to be backed by huge pages: incoherent rays touch nodes
+// all over the arena, and with 4 KiB pages most node visits would also miss the TLB (Embree
+// allocates its BVH the same way). Not cleared: the writers fill every byte, so the pages
+// are first touched by the threads that write them.
+std::unique_ptr<std::byte[], WideBvh::FreeArena> allocate_arena(size_t bytes) {
+  constexpr size_t kHuge = size_t(2) << 20;
+  void* p = nullptr;
+  if (posix_memalign(&p, bytes >= kHuge ? kHuge : 64, std::max<size_t>(bytes, 64)) != 0)
+    throw Error("wide layout: out of memory for " + std::to_string(bytes) + " bytes");
 #ifdef MADV_HUGEPAGE
-    if (capacity_ >= kHuge) madvise(p, capacity_, MADV_HUGEPAGE);
+  if (bytes >= kHuge) madvise(p, bytes, MADV_HUGEPAGE);
 #endif
-    std::memset(p, 0, capacity_);
-    data_.reset(static_cast<std::byte*>(p));
-  }
-  uint32_t reserve(size_t bytes, size_t align) {
-    const size_t at = (used_ + align - 1) / align * align;
-    if ((at + bytes) / kWideUnit > kWideOffsetMask) throw Error("wide layout: the tree needs more than 4 GiB");
-    if (at + bytes > capacity_) throw Error("wide layout: internal error, arena estimate too small");
-    used_ = at + bytes;
-    return uint32_t(at / kWideUnit);
-  }
-  template <class T>
-  T* at(uint32_t unit) {
-    return reinterpret_cast<T*>(data_.get() + size_t(unit) * kWideUnit);
-  }
-  size_t size() const { return (used_ + 63) / 64 * 64; }
-  std::unique_ptr<std::byte[], WideBvh::FreeArena>& storage() { return data_; }
-
- private:
-  size_t capacity_;
-  size_t used_ = 0;
-  std::unique_ptr<std::byte[], WideBvh::FreeArena> data_;
-};
+  return std::unique_ptr<std::byte[], WideBvh::FreeArena>(static_cast<std::byte*>(p));
+}
 
 // Node-type specifics: where the boxes, child words and ranks of a W-wide node are.
 template <uint32_t W>
@@ -84,6 +66,11 @@ struct NodeAccess<4> {
   }
 };
 
+// Depth-first, each node followed by its leaves' blocks (in slot order), then its inner
+// children's subtrees (in slot order); every node on a 64-byte boundary. A subtree's size
+// does not depend on where it is placed, so all offsets are known before anything is
+// written (one pass bottom-up for the sizes, one top-down for the offsets), and the nodes
+// are then written in parallel: the same bytes on any number of threads.
 template <uint32_t W>
 class LayoutBuilder {
   using Access = NodeAccess<W>;
@@ -91,51 +78,97 @@ class LayoutBuilder {
 
  public:
   LayoutBuilder(const CollapsedBvh& wide, const FlatBvh& bvh, const Mesh& mesh, TriangleTest test)
-      : wide_(wide), bvh_(bvh), mesh_(mesh), test_(test), pad_(bvh), arena_(arena_bound(wide)) {}
-
-  // Every node, and every leaf's blocks with a 64-byte alignment gap.
-  static size_t arena_bound(const CollapsedBvh& wide) {
-    size_t bytes = wide.node_count() * sizeof(Node);
-    for (size_t l = 0; l < wide.leaf_count(); ++l)
-      bytes += (wide.leaf_begin[l + 1] - wide.leaf_begin[l] + 3) / 4 * sizeof(TriangleBlock) + 64;
-    return bytes;
+      : wide_(wide), bvh_(bvh), mesh_(mesh), test_(test), pad_(bvh),
+        offset_(wide.node_count()), stack_need_(wide.node_count()) {
+    place();
   }
 
-  // Writes the subtree of wide node w; returns its offset and the deepest stack it needs.
-  uint32_t write(uint32_t w, uint32_t& stack_need) {
-    const uint32_t self = arena_.reserve(sizeof(Node), 64);
+  // Writes every node and block; returns the arena.
+  std::unique_ptr<std::byte[], WideBvh::FreeArena> write() {
+    auto arena = allocate_arena(bytes_);
+    std::byte* base = arena.get();
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, wide_.node_count(), 512), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t w = r.begin(); w < r.end(); ++w) write_node(base, uint32_t(w));
+    });
+    return arena;
+  }
+
+  size_t bytes() const { return bytes_; }
+  size_t blocks() const { return blocks_; }
+  uint32_t stack_need() const { return stack_need_.empty() ? 0 : stack_need_[0]; }
+
+ private:
+  static size_t round64(size_t n) { return (n + 63) / 64 * 64; }
+  uint32_t blocks_of_leaf(uint32_t leaf) const {
+    const uint32_t count = wide_.leaf_begin[leaf + 1] - wide_.leaf_begin[leaf];
+    const uint32_t blocks = (count + 3) / 4;
+    if (blocks == 0 || blocks > kWideMaxBlocks) throw Error("wide layout: a leaf of " + std::to_string(count) + " triangles");
+    return blocks;
+  }
+  // The node and its leaves' blocks.
+  size_t own_bytes(uint32_t w) const {
+    size_t blocks = 0;
+    for (uint32_t s = wide_.child_begin[w]; s < wide_.child_begin[w + 1]; ++s)
+      if (wide_.child_is_leaf[s]) blocks += blocks_of_leaf(wide_.child_index[s]);
+    return sizeof(Node) + round64(blocks * sizeof(TriangleBlock));
+  }
+
+  // Wide nodes are numbered depth-first (children after their parent), so sizes go
+  // bottom-up in reverse order and offsets top-down in order.
+  void place() {
+    const size_t n = wide_.node_count();
+    std::vector<size_t> subtree(n);
+    for (size_t w = n; w-- > 0;) {
+      size_t size = own_bytes(uint32_t(w));
+      uint32_t deepest = 0;
+      const uint32_t begin = wide_.child_begin[w], end = wide_.child_begin[w + 1];
+      for (uint32_t s = begin; s < end; ++s) {
+        if (wide_.child_is_leaf[s]) {
+          blocks_ += blocks_of_leaf(wide_.child_index[s]);
+        } else {
+          size += subtree[wide_.child_index[s]];
+          deepest = std::max(deepest, stack_need_[wide_.child_index[s]]);
+        }
+      }
+      subtree[w] = size;
+      stack_need_[w] = deepest + (end - begin) - 1;
+    }
+    bytes_ = n ? subtree[0] : 0;
+    if (bytes_ / kWideUnit > kWideOffsetMask) throw Error("wide layout: the tree needs more than 4 GiB");
+    for (size_t w = 0; w < n; ++w) {
+      size_t at = offset_[w] + own_bytes(uint32_t(w));
+      for (uint32_t s = wide_.child_begin[w]; s < wide_.child_begin[w + 1]; ++s) {
+        if (wide_.child_is_leaf[s]) continue;
+        offset_[wide_.child_index[s]] = at;
+        at += subtree[wide_.child_index[s]];
+      }
+    }
+  }
+
+  void write_node(std::byte* base, uint32_t w) {
     const uint32_t begin = wide_.child_begin[w], end = wide_.child_begin[w + 1];
     uint32_t words[W];
     std::fill(words, words + W, kWideEmptyChild);
-    for (uint32_t s = begin; s < end; ++s)
-      if (wide_.child_is_leaf[s]) words[s - begin] = write_leaf(wide_.child_index[s]);
-    uint32_t deepest = 0;
+    size_t at = offset_[w] + sizeof(Node);
     for (uint32_t s = begin; s < end; ++s) {
-      if (wide_.child_is_leaf[s]) continue;
-      uint32_t need = 0;
-      words[s - begin] = write(wide_.child_index[s], need);
-      deepest = std::max(deepest, need);
+      if (wide_.child_is_leaf[s]) {
+        const uint32_t blocks = blocks_of_leaf(wide_.child_index[s]);
+        write_leaf(reinterpret_cast<TriangleBlock*>(base + at), wide_.child_index[s], blocks);
+        words[s - begin] = kWideLeafFlag | ((blocks - 1) << 27) | uint32_t(at / kWideUnit);
+        at += blocks * sizeof(TriangleBlock);
+      } else {
+        words[s - begin] = uint32_t(offset_[wide_.child_index[s]] / kWideUnit);
+      }
     }
-    // Arena may have moved: take the node's address only now.
-    fill_node(*arena_.template at<Node>(self), begin, end, words);
-    stack_need = deepest + (end - begin) - 1;
-    ++nodes_;
-    return self;
+    std::memset(base + at, 0, round64(at) - at);  // the gap after an odd number of blocks
+    Node* node = new (base + offset_[w]) Node{};
+    fill_node(*node, begin, end, words);
   }
 
-  ArenaWriter& arena() { return arena_; }
-  size_t nodes() const { return nodes_; }
-  size_t blocks() const { return blocks_; }
-
- private:
-  uint32_t write_leaf(uint32_t leaf) {
+  void write_leaf(TriangleBlock* out, uint32_t leaf, uint32_t blocks) const {
     const uint32_t first = wide_.leaf_begin[leaf], count = wide_.leaf_begin[leaf + 1] - first;
-    const uint32_t blocks = (count + 3) / 4;
-    if (blocks == 0 || blocks > kWideMaxBlocks) throw Error("wide layout: a leaf of " + std::to_string(count) + " triangles");
-    ArenaWriter& target = arena_;
-    const uint32_t unit = target.reserve(blocks * sizeof(TriangleBlock), sizeof(TriangleBlock) % 64 == 0 ? 64 : 32);
     for (uint32_t b = 0; b < blocks; ++b) {
-      TriangleBlock& block = target.template at<TriangleBlock>(unit)[b];
+      TriangleBlock& block = out[b];
       for (uint32_t lane = 0; lane < 4; ++lane) {
         const uint32_t id = wide_.leaf_triangles[first + std::min(4 * b + lane, count - 1)];
         const Triangle t = mesh_.triangle(id);
@@ -146,11 +179,9 @@ class LayoutBuilder {
         block.id[lane] = id;
       }
     }
-    blocks_ += blocks;
-    return kWideLeafFlag | ((blocks - 1) << 27) | unit;
   }
 
-  void fill_node(Node& node, uint32_t begin, uint32_t end, const uint32_t* words) {
+  void fill_node(Node& node, uint32_t begin, uint32_t end, const uint32_t* words) const {
     for (uint32_t c = 0; c < W; ++c) {
       for (int a = 0; a < 3; ++a) {
         node.bounds[2 * a][c] = kInf;
@@ -189,8 +220,9 @@ class LayoutBuilder {
   const Mesh& mesh_;
   TriangleTest test_;
   detail::BoxPadding pad_;
-  ArenaWriter arena_;
-  size_t nodes_ = 0, blocks_ = 0;
+  std::vector<size_t> offset_;        // per wide node, bytes from the arena's start
+  std::vector<uint32_t> stack_need_;  // per wide node, the deepest stack its subtree needs
+  size_t bytes_ = 0, blocks_ = 0;
 };
 
 }  // namespace
@@ -207,20 +239,18 @@ WideBvh::WideBvh(const FlatBvh& bvh, const Mesh& mesh, const WideLayoutOptions& 
   const CollapsedBvh wide = collapse_to_wide(bvh, options.collapse);
   stats_.collapse_seconds = seconds_since(t0);
   t0 = std::chrono::steady_clock::now();
-  auto run = [&](auto& builder) {
-    root_ = builder.write(0, stack_entries_);
-    stats_.nodes = builder.nodes();
+  auto run = [&](auto&& builder) {
+    arena_ = builder.write();
+    root_ = 0;  // the root is the first node
+    stack_entries_ = builder.stack_need();
+    stats_.nodes = wide.node_count();
     stats_.blocks = builder.blocks();
-    stats_.bytes = builder.arena().size();
-    arena_ = std::move(builder.arena().storage());
+    stats_.bytes = builder.bytes();
   };
-  if (width_ == 8) {
-    LayoutBuilder<8> builder(wide, bvh, mesh, test_);
-    run(builder);
-  } else {
-    LayoutBuilder<4> builder(wide, bvh, mesh, test_);
-    run(builder);
-  }
+  if (width_ == 8)
+    run(LayoutBuilder<8>(wide, bvh, mesh, test_));
+  else
+    run(LayoutBuilder<4>(wide, bvh, mesh, test_));
   stack_entries_ += 1 + width_;
   stats_.leaves = wide.leaf_count();
   stats_.triangle_slots = 4 * stats_.blocks;

@@ -1,0 +1,123 @@
+// Collapse + wide layout time against the sweep SAH build time (issue 11's target: at most
+// 10 %), measured in one run on the same tree, on 1 and 2 threads.
+//
+//   layout_bench [--scenes DIR] [--scene FILE]... [--repeats R] [--threads 1,2] [--width 8|4]
+//                [--leaf N] [--json FILE]
+//
+// Per scene and thread count: R rounds, each timing the sweep SAH build of the scene (leaf
+// size 1, the build a user starts from) and then the collapse and the layout of the tree
+// `--leaf` (default 8: the sweep tree compacted into leaves of up to 8, as traced) into
+// `--width`-wide nodes. Each figure is the median of its R samples, wall time (the layout
+// runs on several threads); the process CPU time ratio is printed beside it, since on a
+// shared machine wall times also count other processes.
+#include <tbb/global_control.h>
+
+#include <cstdio>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "bench_support.h"
+
+#include "bvhopt/build.h"
+#include "bvhopt/collapse_leaves.h"
+#include "bvhopt/finalize.h"
+#include "bvhopt/references.h"
+#include "bvhopt/scene_file.h"
+#include "bvhopt/wide_bvh.h"
+
+namespace bvhopt {
+namespace {
+
+using namespace bench;
+
+struct Options {
+  SceneOptions scene_options = SceneOptions::files_only();
+  std::vector<std::string> scenes;
+  int repeats = 7;
+  std::vector<int> threads{1, 2};
+  uint32_t width = 8;
+  uint32_t leaf = 8;
+  std::string json_path;
+};
+
+Options parse(int argc, char** argv) {
+  Options o;
+  Args args(argc, argv, "layout_bench");
+  while (args.next()) {
+    const std::string& a = args.current();
+    if (read_scene_option(args, o.scene_options)) continue;
+    if (a == "--repeats") o.repeats = std::max(1, std::stoi(args.value()));
+    else if (a == "--width") o.width = uint32_t(std::stoul(args.value()));
+    else if (a == "--leaf") o.leaf = uint32_t(std::stoul(args.value()));
+    else if (a == "--json") o.json_path = args.value();
+    else if (a == "--threads") {
+      o.threads.clear();
+      for (const std::string& t : split_list(args.value())) o.threads.push_back(std::max(1, std::stoi(t)));
+    } else if (a == "--help" || a == "-h") {
+      std::cout << "layout_bench [--scenes DIR] [--scene FILE]... [--repeats R] [--threads 1,2] [--width 8|4]\n"
+                   "             [--leaf N] [--json FILE]\n";
+      std::exit(0);
+    } else {
+      throw Error("layout_bench: unknown option '" + a + "'");
+    }
+  }
+  o.scenes = scene_specs(o.scene_options);
+  return o;
+}
+
+struct Samples {
+  std::vector<double> build, collapse, layout, build_cpu, wide_cpu;
+};
+
+int run(const Options& opt) {
+  nlohmann::json rows = nlohmann::json::array();
+  std::printf("# layout_bench: wall-clock medians of %d rounds; collapse + layout of the sweep tree compacted into "
+              "leaves of up to %u, %u-wide\n",
+              opt.repeats, opt.leaf, opt.width);
+  std::printf("%-22s %3s %9s | %10s %10s %10s | %7s %7s\n", "scene", "thr", "triangles", "build ms", "collapse",
+              "layout", "ratio", "cpu");
+  for (const std::string& spec : opt.scenes) {
+    const Mesh mesh = load_mesh_file(spec);
+    const PrimitiveRefs refs = make_references(mesh);
+    const std::string name = std::filesystem::path(spec).filename().string();
+    for (int threads : opt.threads) {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+      Samples s;
+      for (int r = 0; r < opt.repeats; ++r) {
+        Bvh bvh;
+        double cpu0 = process_cpu_seconds();
+        s.build.push_back(seconds_of([&] { bvh = build_bvh(refs, BuildOptions{}); }));
+        s.build_cpu.push_back(process_cpu_seconds() - cpu0);
+        CollapseConfig cc;
+        cc.max_leaf_size = opt.leaf;
+        collapse_leaves(bvh, cc);
+        const FlatBvh flat = finalize(bvh, refs);
+        WideLayoutOptions wo;
+        wo.collapse.width = opt.width;
+        cpu0 = process_cpu_seconds();
+        const WideBvh wide(flat, mesh, wo);
+        s.wide_cpu.push_back(process_cpu_seconds() - cpu0);
+        s.collapse.push_back(wide.stats().collapse_seconds);
+        s.layout.push_back(wide.stats().layout_seconds);
+      }
+      const double build = median(s.build), collapse = median(s.collapse), layout = median(s.layout);
+      const double ratio = (collapse + layout) / build, cpu_ratio = median(s.wide_cpu) / median(s.build_cpu);
+      std::printf("%-22s %3d %9zu | %10.1f %10.1f %10.1f | %6.1f%% %6.1f%%\n", name.c_str(), threads,
+                  mesh.triangle_count(), 1e3 * build, 1e3 * collapse, 1e3 * layout, 100.0 * ratio, 100.0 * cpu_ratio);
+      std::fflush(stdout);
+      rows.push_back({{"scene", name}, {"threads", threads}, {"triangles", mesh.triangle_count()},
+                      {"build_seconds", build}, {"collapse_seconds", collapse}, {"layout_seconds", layout},
+                      {"ratio", ratio}, {"cpu_ratio", cpu_ratio}});
+    }
+  }
+  if (!opt.json_path.empty()) write_json(opt.json_path, {{"bench", "layout_bench"}, {"rows", rows}});
+  return 0;
+}
+
+}  // namespace
+}  // namespace bvhopt
+
+int main(int argc, char** argv) {
+  return bvhopt::bench::guarded_main("layout_bench", [&] { return bvhopt::run(bvhopt::parse(argc, argv)); });
+}
