@@ -5,12 +5,15 @@
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
+#include <optional>
 #include <utility>
 #include <vector>
 
 #include "bvhopt/build.h"
 #include "bvhopt/collapse_leaves.h"
 #include "bvhopt/finalize.h"
+#include "bvhopt/font.h"
+#include "bvhopt/image_legend.h"
 #include "bvhopt/images.h"
 #include "bvhopt/png_file.h"
 #include "bvhopt/insertion_optimizer.h"
@@ -70,6 +73,7 @@ struct DemoRun {
   PrimitiveRefs refs{};
   std::vector<Ray> primary_rays{}, random_rays{};
   uint32_t image_w = 0, image_h = 0;
+  float heat_scale = 0.0f;  // top of the heat maps' shared scale
   std::vector<TraceCounters> unoptimized_steps{};
   struct Best {
     double cost = 1e300;
@@ -217,7 +221,7 @@ void print_demo(const DemoRun& run, const std::filesystem::path& unopt_png, cons
             << "rays: " << run.primary_rays.size() << " primary (" << run.image_w << "x" << run.image_h << "), "
             << run.random_rays.size() << " random; Mrays/s on " << opt.threads.effective() << " threads\n\n";
   print_table(run.rows);
-  std::cout << "\nheat maps (traversal steps per pixel, 0..100): " << unopt_png.string() << " (sweep), "
+  std::cout << "\nheat maps (traversal steps per pixel, 0.." << run.heat_scale << "): " << unopt_png.string() << " (sweep), "
             << best_png.string() << " (" << run.best.method << ")\n";
 }
 
@@ -240,8 +244,13 @@ void run_demo(const DemoOptions& opt) {
   std::filesystem::create_directories(folder);
   const std::filesystem::path unopt_png = folder / "heatmap-sweep.png";
   const std::filesystem::path best_png = folder / "heatmap-best.png";
-  write_png(unopt_png, heatmap_image(run.unoptimized_steps, run.image_w, run.image_h));
-  write_png(best_png, heatmap_image(run.best.steps, run.image_w, run.image_h));
+  std::string font_problem;
+  const std::optional<Font> font = Font::load_default(font_problem);
+  if (!font) std::cerr << "warning: " << font_problem << ": heat maps without captions\n";
+  const std::string scene = "  \u00b7  " + run.mesh.name;
+  run.heat_scale = write_heatmaps({{&run.unoptimized_steps, "sweep" + scene, unopt_png},
+                                   {&run.best.steps, run.best.method + scene, best_png}},
+                                  run.image_w, run.image_h, font ? &*font : nullptr);
   print_demo(run, unopt_png, best_png);
 }
 

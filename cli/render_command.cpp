@@ -1,7 +1,11 @@
 // bvhopt render: heat map of traversal steps per pixel, an eye-light image, and the
 // difference heat map of two trees of one scene.
+#include <filesystem>
 #include <iostream>
+#include <optional>
 
+#include "bvhopt/font.h"
+#include "bvhopt/image_legend.h"
 #include "bvhopt/images.h"
 #include "bvhopt/png_file.h"
 #include "bvhopt/ray_measure.h"
@@ -19,18 +23,53 @@ struct RenderOptions {
   std::string bvh_file;
   SceneOption scene;
   ThreadsOption threads;
-  std::string heatmap, shaded, compare, compare_heatmap;
+  std::string heatmap, shaded, compare, compare_heatmap, other_heatmap;
+  std::string name, compare_name;
   uint32_t width = 1024, height = 768;
   float max_steps = 100.0f;
   float range = 50.0f;
+  std::string scale = "auto";
+  bool range_given = false;
+  bool no_legend = false;
   std::string order = "axis";
   bool json = false;
   CameraOptions camera;
   LayoutOption layout;
 };
 
-// Renders the heat map (and the shaded image, and the difference to --compare when given)
-// of primary rays from the camera, and prints a summary.
+// One tree's primary-ray picture.
+struct TracedView {
+  std::vector<Hit> hits;
+  std::vector<TraceCounters> counters;
+};
+
+TracedView trace_view(const LoadedTree& tree, ChildOrder order, const std::vector<Ray>& rays) {
+  TracedView v;
+  trace_rays(tree.traced(order), rays, RayQuery::closest, v.hits, &v.counters);
+  return v;
+}
+
+// OUT.png with `suffix` before the extension.
+std::string beside(const std::string& path, const std::string& suffix) {
+  const std::filesystem::path p(path);
+  return (p.parent_path() / (p.stem().string() + suffix + p.extension().string())).string();
+}
+
+// Writes a picture with its legend, or the bare picture with --no-legend.
+void write_picture(const std::string& path, const LegendImage& picture, bool legend) {
+  if (!legend) {
+    Image bare{picture.picture.width, picture.picture.height, {}};
+    for (uint32_t y = 0; y < bare.height; ++y)
+      bare.rgb.insert(bare.rgb.end(), picture.image.rgb.begin() + 3 * size_t(y) * picture.image.width,
+                      picture.image.rgb.begin() + 3 * (size_t(y) * picture.image.width + bare.width));
+    write_png(path, bare);
+    return;
+  }
+  write_png(path, picture.image);
+}
+
+// Renders the heat map (and the shaded image, and with --compare the other tree's heat map
+// on the same scale and the difference) of primary rays from the camera, and prints a summary.
 void run_render(const RenderOptions& opt) {
   auto threads = opt.threads.apply();
   ProgressLine progress;
@@ -42,51 +81,80 @@ void run_render(const RenderOptions& opt) {
   const Camera cam = opt.camera.resolve(mesh, *tree.tracer, opt.width, opt.height);
   const std::vector<Ray> rays = camera_rays(cam);
 
-  std::vector<Hit> hits;
-  std::vector<TraceCounters> counters;
-  trace_rays(tree.traced(order), rays, RayQuery::closest, hits, &counters);
-  write_png(opt.heatmap, heatmap_image(counters, cam.width, cam.height, opt.max_steps));
-  if (!opt.shaded.empty()) write_png(opt.shaded, shaded_image(mesh, rays, hits, cam.width, cam.height));
+  const TracedView a = trace_view(tree, order, rays);
+  std::optional<TracedView> b;
+  if (!opt.compare.empty()) b = trace_view(load_tree_for_scene(opt.compare, mesh, opt.layout.layout()), order, rays);
 
-  double mean_a = 0, mean_b = 0;
-  for (const TraceCounters& c : counters) mean_a += c.steps;
-  mean_a /= double(counters.size());
-  std::string diff_path;
-  if (!opt.compare.empty()) {
-    const LoadedTree other = load_tree_for_scene(opt.compare, mesh, opt.layout.layout());
-    std::vector<Hit> hits_b;
-    std::vector<TraceCounters> counters_b;
-    trace_rays(other.traced(order), rays, RayQuery::closest, hits_b, &counters_b);
-    for (const TraceCounters& c : counters_b) mean_b += c.steps;
-    mean_b /= double(counters_b.size());
-    diff_path = opt.compare_heatmap;
-    if (diff_path.empty()) {
-      const std::filesystem::path p(opt.heatmap);
-      diff_path = (p.parent_path() / (p.stem().string() + "-diff" + p.extension().string())).string();
-    }
-    write_png(diff_path, difference_image(counters, counters_b, cam.width, cam.height, opt.range));
+  // One scale for both heat maps, so that equal colours are equal steps.
+  std::vector<const std::vector<TraceCounters>*> maps{&a.counters};
+  if (b) maps.push_back(&b->counters);
+  const bool fixed = opt.scale == "fixed";
+  const float max_steps = fixed ? opt.max_steps : shared_heat_scale(maps);
+  std::string font_problem;
+  const std::optional<Font> font = opt.no_legend ? std::nullopt : Font::load_default(font_problem);
+  if (!opt.no_legend && !font) std::cerr << "warning: " << font_problem << ": pictures without captions\n";
+  const Font* text = font ? &*font : nullptr;
+  const auto title = [&](const std::string& name, const std::string& file) {
+    return (name.empty() ? std::filesystem::path(file).filename().string() : name) + "  \u00b7  " + mesh.name +
+           "  \u00b7  " + opt.layout.name + " layout";
+  };
+  write_picture(opt.heatmap,
+                heatmap_with_legend(a.counters, cam.width, cam.height, max_steps, title(opt.name, opt.bvh_file), text),
+                !opt.no_legend);
+  if (!opt.shaded.empty()) write_png(opt.shaded, shaded_image(mesh, rays, a.hits, cam.width, cam.height));
+
+  size_t hits = 0;
+  for (const Hit& h : a.hits) hits += h.hit();
+  const double hit_fraction = double(hits) / double(std::max<size_t>(a.hits.size(), 1));
+  const double mean_a = mean_steps(a.counters);
+  double mean_b = 0.0;
+  float range = opt.range;
+  std::string diff_path, other_path;
+  if (b) {
+    mean_b = mean_steps(b->counters);
+    other_path = opt.other_heatmap.empty() ? beside(opt.heatmap, "-other") : opt.other_heatmap;
+    write_picture(other_path,
+                  heatmap_with_legend(b->counters, cam.width, cam.height, max_steps, title(opt.compare_name, opt.compare),
+                                      text),
+                  !opt.no_legend);
+    if (!opt.range_given && !fixed) range = difference_scale(a.counters, b->counters);
+    diff_path = opt.compare_heatmap.empty() ? beside(opt.heatmap, "-diff") : opt.compare_heatmap;
+    const auto name_of = [](const std::string& name, const std::string& file) {
+      return name.empty() ? std::filesystem::path(file).filename().string() : name;
+    };
+    write_picture(diff_path,
+                  difference_with_legend(a.counters, b->counters, cam.width, cam.height, range,
+                                         "steps of " + name_of(opt.compare_name, opt.compare) + " minus " +
+                                             name_of(opt.name, opt.bvh_file) + "  \u00b7  " + mesh.name,
+                                         text),
+                  !opt.no_legend);
   }
   if (opt.json) {
-    nlohmann::json j = {{"bvh", opt.bvh_file}, {"scene", mesh.name}, {"width", cam.width},
-                        {"height", cam.height}, {"heatmap", opt.heatmap}, {"mean_steps", mean_a},
-                        {"layout", opt.layout.name}};
+    nlohmann::json j = {{"bvh", opt.bvh_file},   {"scene", mesh.name},         {"width", cam.width},
+                        {"height", cam.height},  {"heatmap", opt.heatmap},     {"mean_steps", mean_a},
+                        {"layout", opt.layout.name}, {"max_steps", max_steps}, {"scale", opt.scale},
+                        {"legend", !opt.no_legend && text != nullptr}, {"hit_fraction", hit_fraction}};
     if (!opt.shaded.empty()) j["shaded"] = opt.shaded;
-    if (!opt.compare.empty()) {
+    if (b) {
       j["compare"] = opt.compare;
       j["compare_mean_steps"] = mean_b;
       j["difference_heatmap"] = diff_path;
+      j["difference_range"] = range;
+      j["other_heatmap"] = other_path;
     }
     print_json(j);
     return;
   }
   std::cout << "image      " << cam.width << "x" << cam.height << ", camera at (" << cam.position.x << ", "
-            << cam.position.y << ", " << cam.position.z << ")\n"
+            << cam.position.y << ", " << cam.position.z << "), " << format_double(100.0 * hit_fraction, 1)
+            << "% of the rays hit\n"
             << "heat map   " << opt.heatmap << " (mean " << format_double(mean_a, 1) << " steps/pixel, scale 0.."
-            << opt.max_steps << ")\n";
+            << max_steps << (fixed ? ", fixed" : ", the 99th percentile rounded up") << ")\n";
   if (!opt.shaded.empty()) std::cout << "shaded     " << opt.shaded << "\n";
-  if (!opt.compare.empty())
-    std::cout << "compare    " << opt.compare << ": mean " << format_double(mean_b, 1) << " steps/pixel; difference "
-              << diff_path << " (red: more steps than " << opt.bvh_file << ")\n";
+  if (b)
+    std::cout << "compare    " << opt.compare << ": mean " << format_double(mean_b, 1) << " steps/pixel, heat map "
+              << other_path << " (same scale); difference " << diff_path << " (red: more steps than " << opt.bvh_file
+              << ", full at +-" << range << ")\n";
 }
 
 }  // namespace
@@ -97,7 +165,8 @@ void register_render_command(CLI::App& app) {
                                                "and the difference of two trees");
   cmd->add_option("bvh", opt->bvh_file, "BVH file")->required()->type_name("FILE.bvh");
   opt->scene.add_to(cmd, "--scene", true);
-  cmd->add_option("--heatmap", opt->heatmap, "PNG: steps per pixel, fixed scale 0 (blue) to --max-steps (red)")
+  cmd->add_option("--heatmap", opt->heatmap,
+                  "PNG: steps per pixel, 0 (blue) to the scale's top (red), with colour bar and caption")
       ->required()
       ->type_name("OUT.png");
   cmd->add_option("--shaded", opt->shaded, "PNG: eye-light shading")->type_name("OUT.png");
@@ -105,13 +174,31 @@ void register_render_command(CLI::App& app) {
   cmd->add_option("--compare-heatmap", opt->compare_heatmap,
                   "PNG: steps of the --compare tree minus this tree's (default: OUT.png with -diff)")
       ->type_name("OUT.png");
+  cmd->add_option("--other-heatmap", opt->other_heatmap,
+                  "PNG: the --compare tree's heat map on the same scale (default: OUT.png with -other)")
+      ->type_name("OUT.png");
+  cmd->add_option("--name", opt->name, "This tree's name in the captions (default: the file name)");
+  cmd->add_option("--compare-name", opt->compare_name, "The --compare tree's name in the captions");
   cmd->add_option("--width", opt->width, "Image width")->check(CLI::Range(1u, 16384u))->capture_default_str();
   cmd->add_option("--height", opt->height, "Image height")->check(CLI::Range(1u, 16384u))->capture_default_str();
-  cmd->add_option("--max-steps", opt->max_steps, "Steps shown as full red (positive)")
+  cmd->add_option("--scale", opt->scale,
+                  "auto: the heat maps' top is the 99th percentile of both trees' steps, rounded up (so a --compare "
+                  "pair shares it); fixed: --max-steps (Bittner's 0-100)")
+      ->check(CLI::IsMember({"auto", "fixed"}))
+      ->capture_default_str();
+  cmd->add_option("--max-steps", opt->max_steps, "Steps shown as full red with --scale fixed (giving it implies fixed)")
       ->check(finite_number())
       ->check(CLI::PositiveNumber)
+      ->capture_default_str()
+      ->each([opt](const std::string&) { opt->scale = "fixed"; });
+  cmd->add_option("--range", opt->range,
+                  "Step difference shown as full red/blue (default: the 99th percentile of |difference|, rounded up; "
+                  "50 with --scale fixed)")
+      ->check(finite_number())
+      ->check(CLI::PositiveNumber)
+      ->each([opt](const std::string&) { opt->range_given = true; })
       ->capture_default_str();
-  cmd->add_option("--range", opt->range, "Step difference shown as full red/blue")->capture_default_str();
+  cmd->add_flag("--no-legend", opt->no_legend, "Pictures without colour bar and caption (one pixel per ray only)");
   cmd->add_option("--order", opt->order, "axis | distance")->check(CLI::IsMember({"axis", "distance"}))->capture_default_str();
   opt->camera.add_to(cmd);
   opt->layout.add_to(cmd);

@@ -106,12 +106,16 @@ struct CameraOptions {
   std::string position, target;
   std::string up = "y";
   float fov = 60.0f;
+  bool fov_given = false;
 
   void add_to(CLI::App* cmd) {
-    cmd->add_option("--camera-position", position, "Camera position (default: from the scene box)")->type_name("X,Y,Z");
+    cmd->add_option("--camera-position", position, "Camera position (default: the scene file's camera, else placed from where the geometry is)")->type_name("X,Y,Z");
     cmd->add_option("--camera-target", target, "Point the camera looks at (needs --camera-position)")->type_name("X,Y,Z");
     cmd->add_option("--up-axis", up, "The scene's up axis")->check(CLI::IsMember({"x", "y", "z"}))->capture_default_str();
-    cmd->add_option("--fov", fov, "Vertical field of view, degrees")->check(CLI::Range(1.0f, 179.0f))->capture_default_str();
+    cmd->add_option("--fov", fov, "Vertical field of view, degrees (default: the scene file's camera's, else 60)")
+        ->check(CLI::Range(1.0f, 179.0f))
+        ->capture_default_str()
+        ->each([this](const std::string&) { fov_given = true; });
   }
   int up_axis() const { return up == "x" ? 0 : (up == "z" ? 2 : 1); }
 
@@ -145,9 +149,7 @@ struct CameraOptions {
   Camera resolve(const Mesh& mesh, const Tracer& tracer, uint32_t width, uint32_t height) const {
     if (auto c = camera(width, height)) return *c;
     Camera c = default_camera(mesh, tracer, width, height, up_axis());
-    if (fov != c.fov_degrees) {
-      c.fov_degrees = fov;  // keep the default position; only widen or narrow the view
-    }
+    if (fov_given) c.fov_degrees = fov;  // keep the default position; only widen or narrow the view
     return c;
   }
 };

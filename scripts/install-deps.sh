@@ -3,7 +3,7 @@
 set -euo pipefail
 packages=(
   g++ cmake ninja-build pkg-config ccache
-  libassimp-dev libtbb-dev libcli11-dev nlohmann-json3-dev libstb-dev
+  libassimp-dev libtbb-dev libcli11-dev nlohmann-json3-dev libstb-dev fonts-dejavu-core
   libgtest-dev libgmock-dev libbenchmark-dev
   libembree-dev python3 python3-matplotlib
   python3-dev pybind11-dev python3-numpy python3-pytest

@@ -19,52 +19,6 @@
 namespace bvhopt {
 namespace {
 
-struct ManifestRow {
-  std::string file;
-  uint64_t triangles = 0;
-};
-
-// MANIFEST.tsv: a header naming the columns, then one scene a line; the columns are
-// found by name so that adding one does not break the test.
-std::vector<ManifestRow> read_manifest(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) ADD_FAILURE() << "cannot open " << path;
-  auto split = [](const std::string& line) {
-    std::vector<std::string> cells;
-    std::stringstream s(line);
-    for (std::string cell; std::getline(s, cell, '\t');) cells.push_back(cell);
-    return cells;
-  };
-  std::string line;
-  std::getline(in, line);
-  const auto header = split(line);
-  int file_col = -1, tri_col = -1;
-  for (size_t i = 0; i < header.size(); ++i) {
-    if (header[i] == "file") file_col = static_cast<int>(i);
-    if (header[i] == "triangles") tri_col = static_cast<int>(i);
-  }
-  if (file_col < 0 || tri_col < 0) {
-    ADD_FAILURE() << path << ": header lacks 'file' or 'triangles': " << line;
-    return {};
-  }
-  std::vector<ManifestRow> rows;
-  for (int n = 2; std::getline(in, line); ++n) {
-    if (line.empty()) continue;
-    const auto cells = split(line);
-    if (cells.size() <= static_cast<size_t>(std::max(file_col, tri_col))) {
-      ADD_FAILURE() << path << ": line " << n << " has too few columns";
-      continue;
-    }
-    rows.push_back({cells[file_col], std::stoull(cells[tri_col])});
-  }
-  return rows;
-}
-
-bool skip_large() {
-  const char* env = std::getenv("BVHOPT_SKIP_LARGE");
-  return env && std::string(env) == "1";
-}
-
 class SharedScenes : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -76,7 +30,7 @@ class SharedScenes : public ::testing::Test {
 
 TEST_F(SharedScenes, ManifestListsEverySceneFile) {
   std::set<std::string> listed;
-  for (const auto& row : read_manifest(dir_ / "MANIFEST.tsv")) listed.insert(row.file);
+  for (const auto& row : testing::read_manifest(dir_ / "MANIFEST.tsv")) listed.insert(row.file);
   EXPECT_GE(listed.size(), 1u);
   for (const auto& entry : std::filesystem::directory_iterator(dir_)) {
     const std::string ext = entry.path().extension().string();
@@ -90,11 +44,11 @@ TEST_F(SharedScenes, ManifestListsEverySceneFile) {
 // quickest builder) and checks that the tree is valid and holds one reference per triangle.
 // Under BVHOPT_SKIP_LARGE=1 (the sanitizer run) scenes above 100k triangles are left out.
 TEST_F(SharedScenes, EachLoadsWithManifestCountAndBuilds) {
-  const auto rows = read_manifest(dir_ / "MANIFEST.tsv");
+  const auto rows = testing::read_manifest(dir_ / "MANIFEST.tsv");
   ASSERT_FALSE(rows.empty());
   for (const auto& row : rows) {
     SCOPED_TRACE(row.file);
-    if (skip_large() && row.triangles > 100'000) continue;
+    if (testing::skip_large_scenes() && row.triangles > 100'000) continue;
     Mesh mesh;
     ASSERT_NO_THROW(mesh = load_mesh_file(dir_ / row.file));
     EXPECT_EQ(mesh.name, row.file);
@@ -120,7 +74,7 @@ TEST_F(SharedScenes, DegenerateTrianglesAreKept) {
   for (const Expected& e : {Expected{"conference.obj", 52'670, 53'627}, Expected{"staircase.obj", 2'429, 2'432}}) {
     SCOPED_TRACE(e.file);
     if (!std::filesystem::exists(dir_ / e.file)) continue;
-    if (skip_large() && std::string(e.file) == "conference.obj") continue;
+    if (testing::skip_large_scenes() && std::string(e.file) == "conference.obj") continue;
     const MeshInfo info = describe(load_mesh_file(dir_ / e.file));
     EXPECT_EQ(info.coincident_triangles, e.coincident);
     EXPECT_EQ(info.degenerate_triangles, e.zero_area);

@@ -3,6 +3,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
@@ -128,6 +129,46 @@ ProgramTest::Result ProgramTest::run(const std::string& args) {
   const std::string cmd = exe_.string() + " " + args + " >" + out.string() + " 2>" + err.string() + " </dev/null";
   const int status = std::system(cmd.c_str());
   return {WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status), read_text(out), read_text(err)};
+}
+
+std::vector<ManifestRow> read_manifest(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) ADD_FAILURE() << "cannot open " << path;
+  auto split = [](const std::string& line) {
+    std::vector<std::string> cells;
+    std::stringstream s(line);
+    for (std::string cell; std::getline(s, cell, '\t');) cells.push_back(cell);
+    return cells;
+  };
+  std::string line;
+  std::getline(in, line);
+  const auto header = split(line);
+  int file_col = -1, tri_col = -1, kind_col = -1;
+  for (size_t i = 0; i < header.size(); ++i) {
+    if (header[i] == "file") file_col = static_cast<int>(i);
+    if (header[i] == "triangles") tri_col = static_cast<int>(i);
+    if (header[i] == "kind") kind_col = static_cast<int>(i);
+  }
+  if (file_col < 0 || tri_col < 0) {
+    ADD_FAILURE() << path << ": header lacks 'file' or 'triangles': " << line;
+    return {};
+  }
+  std::vector<ManifestRow> rows;
+  for (int n = 2; std::getline(in, line); ++n) {
+    if (line.empty()) continue;
+    const auto cells = split(line);
+    if (cells.size() <= static_cast<size_t>(std::max({file_col, tri_col, kind_col}))) {
+      ADD_FAILURE() << path << ": line " << n << " has too few columns";
+      continue;
+    }
+    rows.push_back({cells[file_col], std::stoull(cells[tri_col]), kind_col >= 0 ? cells[kind_col] : std::string()});
+  }
+  return rows;
+}
+
+bool skip_large_scenes() {
+  const char* env = std::getenv("BVHOPT_SKIP_LARGE");
+  return env && std::string(env) == "1";
 }
 
 }  // namespace bvhopt::testing

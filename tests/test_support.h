@@ -17,6 +17,20 @@ namespace bvhopt::testing {
 // The shared scenes folder: $BVHOPT_SCENES if set, else ../shared/scenes beside the repository.
 std::filesystem::path scenes_dir();
 
+// One scene of the shared folder's MANIFEST.tsv.
+struct ManifestRow {
+  std::string file;
+  uint64_t triangles = 0;
+  std::string kind;  // architectural (interiors), scanned, other
+};
+
+// MANIFEST.tsv: a header naming the columns, then one scene a line; the columns are
+// found by name so that adding one does not break the tests. Problems are test failures.
+std::vector<ManifestRow> read_manifest(const std::filesystem::path& path);
+
+// BVHOPT_SKIP_LARGE=1 (the sanitizer run): tests leave out scenes above 100k triangles.
+bool skip_large_scenes();
+
 // A soup of `triangles` random triangles in [0, extent]^3, sizes varying over two orders of
 // magnitude, with some degenerate ones when `with_degenerate` is set. Deterministic in seed.
 Mesh random_mesh(uint32_t triangles, uint64_t seed, bool with_degenerate = false);

@@ -445,8 +445,9 @@ void write_report(const json& results, const ReportTables& t, const fs::path& ou
   r << "### Table 1: area reduction factors (t = 14)\n\n`frame16` is the scene rotated by (45, 10, 15) degrees, the "
        "pose of the paper's Sponza row; unrotated architecture is mostly axis-aligned and splits little.\n\n"
     << t.area.markdown() << "\n";
-  r << "## Heat maps\n\nTraversal steps per primary ray, 0 (blue) to 100 or more (red): the unoptimized SAH tree and "
-       "the lowest-cost tree of each scene.\n\n";
+  r << "## Heat maps\n\nTraversal steps per primary ray of the unoptimized SAH tree and the lowest-cost tree of "
+       "each scene, the two on one scale (0 blue, red at the 99th percentile of both, rounded up; each image's colour "
+       "bar gives it in steps and its caption the mean).\n\n";
   for (size_t i = 0; i + 1 < t.heatmaps.size(); i += 2)
     r << "![" << t.heatmaps[i] << "](" << t.heatmaps[i] << ") ![" << t.heatmaps[i + 1] << "](" << t.heatmaps[i + 1] << ")\n\n";
   r << "## The papers beside us\n\nPublished figures (typed in from the papers) next to ours for scenes sharing a name. "
@@ -454,6 +455,7 @@ void write_report(const json& results, const ReportTables& t, const fs::path& ou
        "ratios are compared; his and Bittner's times are from 2008/2013 single-threaded machines, and Bittner's relative build time is to an SAH builder the paper calls unoptimized (ours builds in a fraction of the time, so the same optimization time is a much larger ratio).\n\n";
   if (t.papers.empty()) r << "(no scene here shares a name with the papers' scenes)\n\n";
   else r << t.papers.markdown() << "\n";
+  if (fs::exists(out / "fig_papers.png")) r << "![Our figures beside the papers' published ones](fig_papers.png)\n\n";
   r << "## Plots\n\n" << (plot_note.empty() ? "Plots made by scripts/plot_experiment.py from the CSVs." : plot_note) << "\n";
   write_text_file(out / "report.md", r.str());
 }

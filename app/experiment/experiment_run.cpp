@@ -6,6 +6,8 @@
 #include <cmath>
 #include <ctime>
 #include <fstream>
+#include <iostream>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -16,6 +18,8 @@
 #include "bvhopt/error.h"
 #include "experiment/experiment.h"
 #include "bvhopt/finalize.h"
+#include "bvhopt/font.h"
+#include "bvhopt/image_legend.h"
 #include "bvhopt/images.h"
 #include "bvhopt/png_file.h"
 #include "bvhopt/insertion_optimizer.h"
@@ -299,11 +303,22 @@ json tree_det(const Bvh& bvh) {
               {"root_area", st.root_area}};
 }
 
-void write_heatmap(const Tracer& tracer, const RaySet& camera_rays, const fs::path& file) {
+std::vector<TraceCounters> heatmap_steps(const Tracer& tracer, const RaySet& camera_rays) {
   std::vector<Hit> hits;
   std::vector<TraceCounters> counters;
   trace_rays(tracer, camera_rays.rays, RayQuery::closest, hits, &counters);
-  write_png(file, heatmap_image(counters, camera_rays.width, camera_rays.height));
+  return counters;
+}
+
+// The heat maps of the SAH tree and the best one, on one scale, with legends.
+void write_heatmap_pair(const Tracer& sah, const Tracer& best, const std::string& best_key, const RaySet& camera_rays,
+                        const std::string& scene, const fs::path& sah_file, const fs::path& best_file) {
+  std::string font_problem;
+  const std::optional<Font> font = Font::load_default(font_problem);
+  if (!font) std::cerr << "warning: " << font_problem << ": heat maps without captions\n";
+  const std::vector<TraceCounters> a = heatmap_steps(sah, camera_rays), b = heatmap_steps(best, camera_rays);
+  write_heatmaps({{&a, "sah  \u00b7  " + scene, sah_file}, {&b, best_key + " (best)  \u00b7  " + scene, best_file}},
+                 camera_rays.width, camera_rays.height, font ? &*font : nullptr);
 }
 
 // Kensler's Table 1 and Figures 3-4, Bittner's Table 1 and Figure 7, on one scene.
@@ -471,10 +486,13 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
   det["best_tree"] = best_key;
   const std::string heat_sah = "heat_" + name + "_sah.png";
   const std::string heat_best = "heat_" + name + "_best.png";
+  const Tracer* sah_tracer = nullptr;
+  const Tracer* best_tracer = nullptr;
   for (const TracedTree& t : traced) {
-    if (t.key == "sah") write_heatmap(t.tracer, rays.heat, out / heat_sah);
-    if (t.key == best_key) write_heatmap(t.tracer, rays.heat, out / heat_best);
+    if (t.key == "sah") sah_tracer = &t.tracer;
+    if (t.key == best_key) best_tracer = &t.tracer;
   }
+  write_heatmap_pair(*sah_tracer, *best_tracer, best_key, rays.heat, mesh.name, out / heat_sah, out / heat_best);
   return json{{"det", det}, {"timing", timing}, {"images", {heat_sah, heat_best}}};
 }
 

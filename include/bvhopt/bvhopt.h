@@ -8,4 +8,6 @@
 #include "bvhopt/bvh_file.h"
 #include "bvhopt/ray_file.h"
 #include "bvhopt/png_file.h"
+#include "bvhopt/font.h"
+#include "bvhopt/image_legend.h"
 #include "bvhopt/atomic_file.h"

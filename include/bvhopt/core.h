@@ -6,6 +6,7 @@
 #include "bvhopt/vec3.h"
 #include "bvhopt/box.h"
 #include "bvhopt/triangle.h"
+#include "bvhopt/camera.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/scene.h"
 

@@ -29,8 +29,13 @@ Image heatmap_image(const std::vector<TraceCounters>& counters, uint32_t width, 
 Image shaded_image(const Mesh& mesh, const std::vector<Ray>& rays, const std::vector<Hit>& hits, uint32_t width,
                    uint32_t height);
 
-// Steps of tree B minus steps of tree A per pixel: blue where B takes fewer steps, red where
-// it takes more, white where equal; full colour at +-`range` steps.
+// The diverging map of differences: white at 0, through light to dark red at +`range` and
+// beyond, and the mirror image in blue (red and blue swapped) for negative values, so that
+// equal differences of opposite sign look equally strong.
+void diverging_color(float difference, float range, uint8_t rgb[3]);
+
+// Steps of tree B minus steps of tree A per pixel, in diverging_color: blue where B takes
+// fewer steps, red where it takes more, white where equal; full colour at +-`range` steps.
 Image difference_image(const std::vector<TraceCounters>& a, const std::vector<TraceCounters>& b, uint32_t width,
                        uint32_t height, float range = 50.0f);
 

@@ -3,10 +3,12 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "bvhopt/box.h"
+#include "bvhopt/camera.h"
 #include "bvhopt/triangle.h"
 
 namespace bvhopt {
@@ -15,6 +17,9 @@ struct Mesh {
   std::string name;                // where it came from: a file name or a built-in scene spec
   std::vector<float> positions;    // x, y, z per vertex
   std::vector<uint32_t> indices;   // three vertex indices per triangle
+  // A camera stored in the scene file (glTF, FBX, ...), in the positions' space; its
+  // width and height are not the file's (default_camera sets them).
+  std::optional<Camera> camera;
 
   size_t vertex_count() const { return positions.size() / 3; }
   size_t triangle_count() const { return indices.size() / 3; }
@@ -49,13 +54,16 @@ struct MeshInfo {
 
 MeshInfo describe(const Mesh& mesh);
 
+// The box of every vertex (an empty box for no vertices).
+Box mesh_bounds(const Mesh& mesh);
+
 // Throws Error naming `mesh.name`, the element and the problem when the mesh is unusable:
 // no triangles, an index list not a multiple of three, an index out of range, a NaN or
 // infinite coordinate. Degenerate triangles pass.
 void check_mesh(const Mesh& mesh);
 
 // Rotates the mesh in place by the given angles in degrees about x, then y, then z,
-// around the centre of its bounding box.
+// around the centre of its bounding box; the stored camera, if any, turns with it.
 void rotate_mesh(Mesh& mesh, const Vec3& degrees);
 
 }  // namespace bvhopt

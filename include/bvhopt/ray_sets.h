@@ -9,6 +9,7 @@
 #include <string_view>
 #include <vector>
 
+#include "bvhopt/camera.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/ray.h"
 #include "bvhopt/tracer.h"
@@ -28,28 +29,29 @@ std::string_view ray_kind_name(RayKind kind);
 std::optional<RayKind> parse_ray_kind(std::string_view name);
 std::vector<RayKind> all_ray_kinds();
 
-struct Camera {
-  Vec3 position;
-  Vec3 target{0.0f, 0.0f, -1.0f};
-  Vec3 up{0.0f, 1.0f, 0.0f};
-  float fov_degrees = 60.0f;  // vertical field of view
-  uint32_t width = 1024;
-  uint32_t height = 768;
-};
-
-// The default view of a scene, from its bounding box and a few probe rays.
+// The default view of a scene, in this order:
+// 1. The camera stored in the scene file (Mesh::camera: glTF, FBX, ...), at this resolution.
+// 2. Interior: probe rays from a centre along the six axis directions and the eight
+//    diagonals; when at least 12 of the 14 hit geometry, most of those hits are on front
+//    faces (the centre is enclosed by walls facing it, not inside a closed solid whose back
+//    faces it sees) and the median probe gets far enough toward the box boundary (room to
+//    look), the camera stands there looking along the longer horizontal axis of the box
+//    (toward +). Tried at the centre of the bounding box (30% of the way), then at the
+//    centre of the geometry's box (see geometry_bounds; half way), so that a room inside a
+//    huge ground plane is still seen from inside.
+// 3. Exterior: the camera looks at the centre of the geometry's box along a horizontal
+//    axis, from outside, at the distance where the box's height and width fill the image
+//    with a 5% margin at the box's centre; of the four horizontal sides, the one whose
+//    probe image (64x48) has the most hits, the +short axis first and hits above 90%
+//    counting as equal (so the wide side fills the image).
 // Up is +y (the convention of the shared scenes' formats) unless `up_axis` says otherwise.
-// Interior: probe rays from the box centre along the six axis directions and the eight
-// diagonals; when at least 12 of the 14 hit geometry, most of those hits are on front
-// faces (the centre is enclosed by walls facing it, not inside a closed solid whose back
-// faces it sees) and the median probe gets at least 30% of the way to the box boundary
-// (room to look), the camera stands there looking along the longer horizontal axis of the
-// box (toward +).
-// Exterior: the camera looks at the box centre along the shorter horizontal axis (so the
-// wide side fills the image), from outside, at the distance where the box's height and
-// width fill the image with a 10% margin.
 Camera default_camera(const Mesh& mesh, const Tracer& tracer, uint32_t width = 1024, uint32_t height = 768,
                       int up_axis = 1);
+
+// Where the geometry is, robust to a few huge triangles (a ground plane far larger than
+// the room on it): per axis, the 1st to 99th percentile of the triangle centroids, by count.
+// The bounding box for meshes of fewer than 100 triangles.
+Box geometry_bounds(const Mesh& mesh);
 
 // One primary ray per pixel centre, row-major from the top-left pixel; directions unit length.
 std::vector<Ray> camera_rays(const Camera& camera);

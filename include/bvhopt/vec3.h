@@ -39,6 +39,12 @@ inline float length(const Vec3& v) { return std::sqrt(dot(v, v)); }
 inline Vec3 normalize(const Vec3& v) { return v / length(v); }
 inline Vec3 min(const Vec3& a, const Vec3& b) { return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)}; }
 inline Vec3 max(const Vec3& a, const Vec3& b) { return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)}; }
+// The vector s along one axis (0 x, 1 y, 2 z).
+inline Vec3 axis_vector(int axis, float s = 1.0f) {
+  Vec3 v(0.0f);
+  v[axis] = s;
+  return v;
+}
 inline bool is_finite(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
 }  // namespace bvhopt

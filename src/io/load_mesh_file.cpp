@@ -16,6 +16,7 @@
 #include "bvhopt/error.h"
 #include "bvhopt/scene_file.h"
 #include "io/ply_precheck.h"
+#include "io/scene_camera.h"
 
 namespace bvhopt {
 
@@ -181,9 +182,13 @@ Mesh load_mesh_file(const std::filesystem::path& path) {
   // triangles" rather than an error from a post-processing step about orphaned meshes.
   const aiScene* scene = read_scene(importer, path, where);
   check_scene(scene, where);
+  const std::string ext = path.extension().string();
+  const bool gltf = ext == ".gltf" || ext == ".glb" || ext == ".GLTF" || ext == ".GLB";
+  const std::optional<Camera> camera = scene_file_camera(scene, gltf);
   scene = importer.ApplyPostProcessing(kPostProcessing);
   if (!scene) throw Error(where + ": cannot process: " + clean_assimp_error(importer.GetErrorString()));
   Mesh out = merge_meshes(scene, path, where);
+  out.camera = camera;
   weld_identical_positions(out);
   check_mesh(out);
   return out;

@@ -1,11 +1,18 @@
 // Mesh summaries, validation and rotation.
 #include <cmath>
 #include <string>
+#include <utility>
 
 #include "bvhopt/error.h"
 #include "bvhopt/mesh.h"
 
 namespace bvhopt {
+
+Box mesh_bounds(const Mesh& mesh) {
+  Box b;
+  for (size_t v = 0; v < mesh.vertex_count(); ++v) b.extend(mesh.vertex(v));
+  return b;
+}
 
 MeshInfo describe(const Mesh& mesh) {
   MeshInfo info;
@@ -73,6 +80,12 @@ void sin_cos_degrees(double degrees, double& s, double& c) {
   c = std::cos(rad);
 }
 
+// p = centre + m (p - centre), in double.
+void rotate_point(const double m[3][3], const double centre[3], float* p) {
+  const double d[3] = {p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]};
+  for (int r = 0; r < 3; ++r) p[r] = static_cast<float>(centre[r] + m[r][0] * d[0] + m[r][1] * d[1] + m[r][2] * d[2]);
+}
+
 }  // namespace
 
 void rotate_mesh(Mesh& mesh, const Vec3& degrees) {
@@ -95,10 +108,15 @@ void rotate_mesh(Mesh& mesh, const Vec3& degrees) {
   const double centre[3] = {0.5 * (double(bounds.min.x) + bounds.max.x), 0.5 * (double(bounds.min.y) + bounds.max.y),
                             0.5 * (double(bounds.min.z) + bounds.max.z)};
   float* p = mesh.positions.data();
-  for (size_t v = 0; v < n; ++v) {
-    const double d[3] = {p[3 * v] - centre[0], p[3 * v + 1] - centre[1], p[3 * v + 2] - centre[2]};
-    for (int r = 0; r < 3; ++r)
-      p[3 * v + r] = static_cast<float>(centre[r] + m[r][0] * d[0] + m[r][1] * d[1] + m[r][2] * d[2]);
+  for (size_t v = 0; v < n; ++v) rotate_point(m, centre, p + 3 * v);
+  if (mesh.camera) {
+    Camera& cam = *mesh.camera;
+    const double origin[3] = {0.0, 0.0, 0.0};
+    for (auto [point, about] : {std::pair{&cam.position, centre}, {&cam.target, centre}, {&cam.up, origin}}) {
+      float xyz[3] = {point->x, point->y, point->z};
+      rotate_point(m, about, xyz);
+      *point = Vec3(xyz[0], xyz[1], xyz[2]);
+    }
   }
 }
 

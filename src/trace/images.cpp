@@ -1,7 +1,6 @@
 // Heat maps, shaded images and difference images (written as PNG by src/io/png_file.cpp).
 #include "bvhopt/images.h"
 
-
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -56,23 +55,29 @@ Image shaded_image(const Mesh& mesh, const std::vector<Ray>& rays, const std::ve
   return img;
 }
 
+void diverging_color(float difference, float range, uint8_t rgb[3]) {
+  // The red half, piecewise linear from white through salmon to dark red; the blue half is
+  // the same with red and blue swapped.
+  static constexpr float stops[3][3] = {{1.0f, 1.0f, 1.0f}, {0.96f, 0.50f, 0.40f}, {0.60f, 0.02f, 0.08f}};
+  const float d = std::clamp(range > 0.0f ? difference / range : 0.0f, -1.0f, 1.0f);
+  const float x = std::fabs(d) * 2.0f;
+  const int i = std::min(static_cast<int>(x), 1);
+  const float f = x - float(i);
+  uint8_t c[3];
+  for (int k = 0; k < 3; ++k) c[k] = to_byte(stops[i][k] * (1.0f - f) + stops[i + 1][k] * f);
+  const bool red = d >= 0.0f;
+  rgb[0] = red ? c[0] : c[2];
+  rgb[1] = c[1];
+  rgb[2] = red ? c[2] : c[0];
+}
+
 Image difference_image(const std::vector<TraceCounters>& a, const std::vector<TraceCounters>& b, uint32_t width,
                        uint32_t height, float range) {
   check_size(a.size(), width, height, "difference image");
   check_size(b.size(), width, height, "difference image");
   Image img{width, height, std::vector<uint8_t>(size_t(width) * height * 3)};
-  for (size_t i = 0; i < a.size(); ++i) {
-    const float d = std::clamp((float(b[i].steps) - float(a[i].steps)) / std::max(range, 1e-6f), -1.0f, 1.0f);
-    const float keep = 1.0f - std::fabs(d);
-    uint8_t* p = &img.rgb[3 * i];
-    if (d >= 0.0f) {
-      p[0] = 255;
-      p[1] = p[2] = to_byte(keep);
-    } else {
-      p[2] = 255;
-      p[0] = p[1] = to_byte(keep);
-    }
-  }
+  const float r = std::max(range, 1e-6f);
+  for (size_t i = 0; i < a.size(); ++i) diverging_color(float(b[i].steps) - float(a[i].steps), r, &img.rgb[3 * i]);
   return img;
 }
 

@@ -27,18 +27,6 @@ struct Rng : RandomStream {
   float uniform() { return uniform_float(); }  // [0, 1)
 };
 
-Box mesh_bounds(const Mesh& mesh) {
-  Box b;
-  for (size_t v = 0; v < mesh.vertex_count(); ++v) b.extend(mesh.vertex(v));
-  return b;
-}
-
-Vec3 axis_vector(int axis, float s = 1.0f) {
-  Vec3 v(0.0f);
-  v[axis] = s;
-  return v;
-}
-
 // Unit geometric normal of the hit triangle, turned toward the side the ray came from.
 // Returns false for triangles too thin to have a usable normal.
 bool facing_normal(const Triangle& tri, const Vec3& dir, Vec3& n) {
@@ -123,68 +111,6 @@ std::optional<RayKind> parse_ray_kind(std::string_view name) {
 
 std::vector<RayKind> all_ray_kinds() {
   return {RayKind::primary, RayKind::random, RayKind::ao, RayKind::path, RayKind::shadow};
-}
-
-Camera default_camera(const Mesh& mesh, const Tracer& tracer, uint32_t width, uint32_t height, int up_axis) {
-  // Only keeps a point-sized scene's camera off its target; any fixed length would move
-  // the camera of a scene smaller than it (a scene scaled by 2^-60 is 1e-18 across).
-  constexpr float kTiny = std::numeric_limits<float>::min();
-  if (up_axis < 0 || up_axis > 2) throw Error("default camera: up axis " + std::to_string(up_axis) + " is not 0, 1 or 2");
-  const Box box = mesh_bounds(mesh);
-  const Vec3 centre = box.center();
-  const Vec3 ext = box.extent();
-  const int h0 = up_axis == 0 ? 1 : 0;
-  const int h1 = up_axis == 2 ? 1 : 2;
-  const int long_axis = ext[h0] >= ext[h1] ? h0 : h1;
-  const int short_axis = long_axis == h0 ? h1 : h0;
-
-  int hits = 0, front = 0;
-  std::vector<float> reach;  // hit distance over the distance to the box boundary
-  TraceCounters counters;
-  // `dir` reaches the box boundary at t = boundary_t.
-  auto probe = [&](const Vec3& dir, float boundary_t) {
-    if (dir == Vec3(0.0f) || !(boundary_t > 0.0f)) return;
-    Ray r;
-    r.org = centre;
-    r.dir = dir;
-    const Hit h = tracer.closest(r, counters);
-    if (!h.hit()) return;
-    ++hits;
-    reach.push_back(h.t / boundary_t);
-    const Triangle t = mesh.triangle(h.triangle_id);
-    // The unit direction: with `dir` (the box's size) the product is a cube of the
-    // scene's scale, which overflows a float above coordinates of about 7e12.
-    front += dot(cross(t.v1 - t.v0, t.v2 - t.v0), normalize(dir)) < 0.0f ? 1 : 0;
-  };
-  for (int a = 0; a < 3; ++a)
-    for (float s : {-1.0f, 1.0f}) probe(axis_vector(a, s), 0.5f * ext[a]);
-  for (int i = 0; i < 8; ++i)
-    probe(Vec3((i & 1) ? ext.x : -ext.x, (i & 2) ? ext.y : -ext.y, (i & 4) ? ext.z : -ext.z), 0.5f);
-  std::sort(reach.begin(), reach.end());
-  const float median_reach = reach.empty() ? 0.0f : reach[reach.size() / 2];
-
-  Camera cam;
-  cam.width = width;
-  cam.height = height;
-  cam.up = axis_vector(up_axis);
-  // Enclosed, by surfaces facing the centre (walls seen from inside a room, not the back
-  // faces of a solid the centre lies in, such as a statue), and with room to look: the
-  // median probe travels at least 30% of the way to the box boundary (a solid with
-  // inward-facing triangles is hit close to the centre).
-  if (hits >= 12 && 2 * front > hits && median_reach >= 0.3f) {
-    cam.position = centre;
-    cam.target = centre + axis_vector(long_axis, std::max(ext[long_axis], kTiny));
-    return cam;
-  }
-  // Frame the box: its extent along up fills the height, along the long axis the width,
-  // with a 10% margin, measured from the box face nearest the camera.
-  const float tan_half = std::tan(0.5f * cam.fov_degrees * std::numbers::pi_v<float> / 180.0f);
-  const float aspect = float(width) / float(std::max<uint32_t>(height, 1));
-  const float fit = std::max(0.5f * ext[up_axis] / tan_half, 0.5f * ext[long_axis] / (tan_half * aspect));
-  const float distance = std::max(0.5f * ext[short_axis] + 1.1f * fit, kTiny);
-  cam.target = centre;
-  cam.position = centre + axis_vector(short_axis, distance);
-  return cam;
 }
 
 std::vector<Ray> camera_rays(const Camera& cam) {
