@@ -20,6 +20,7 @@
 #include "bvhopt/stats.h"
 #include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
+#include "bvhopt/atomic_file.h"
 #include "cli_common.h"
 #include "trace_common.h"
 #include "commands.h"
@@ -222,6 +223,7 @@ void print_demo(const DemoRun& run, const std::filesystem::path& unopt_png, cons
 }
 
 void run_demo(const DemoOptions& opt) {
+  check_output_folder(opt.images, "--images");
   auto threads = opt.threads.apply();
   ProgressLine progress;
   DemoRun run{opt, opt.cost.model(), progress};
@@ -254,10 +256,11 @@ void register_demo_command(CLI::App& app) {
   cmd->add_option("--triangles", opt->triangles, "Size of the built-in scene")
       ->check(CLI::Range(uint64_t{100}, uint64_t{100'000'000}))
       ->capture_default_str();
-  cmd->add_option("--seed", opt->seed, "Seed of the built-in scene and of the optimizers")->capture_default_str();
+  cmd->add_option("--seed", opt->seed, "Seed of the built-in scene and of the optimizers")->check(whole_number(0, UINT64_MAX))->capture_default_str();
   cmd->add_option("--images", opt->images, "Folder for the heat maps of the unoptimized and the best tree")
       ->capture_default_str();
-  cmd->add_option("--rays", opt->rays, "Rays per set (default: 1024x768 primary rays and 500,000 random rays)");
+  cmd->add_option("--rays", opt->rays, "Rays per set (default: 1024x768 primary rays and 500,000 random rays)")
+      ->check(whole_number(1, kMaxRayCount));
   cmd->add_flag("--quick", opt->quick, "Shorter annealing schedule (250 passes instead of 1250)");
   opt->cost.add_to(cmd);
   opt->layout.add_to(cmd);

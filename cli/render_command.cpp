@@ -2,6 +2,7 @@
 // difference heat map of two trees of one scene.
 #include <iostream>
 
+#include "bvhopt/atomic_file.h"
 #include "bvhopt/images.h"
 #include "bvhopt/png_file.h"
 #include "bvhopt/ray_measure.h"
@@ -29,9 +30,20 @@ struct RenderOptions {
   LayoutOption layout;
 };
 
+// Where the difference heat map goes: --compare-heatmap, or OUT.png with -diff.
+std::string difference_path(const RenderOptions& opt) {
+  if (!opt.compare_heatmap.empty()) return opt.compare_heatmap;
+  const std::filesystem::path p(opt.heatmap);
+  return (p.parent_path() / (p.stem().string() + "-diff" + p.extension().string())).string();
+}
+
 // Renders the heat map (and the shaded image, and the difference to --compare when given)
-// of primary rays from the camera, and prints a summary.
+// of primary rays from the camera, and prints a summary. Every output is checked before the
+// work and the images are written all or none.
 void run_render(const RenderOptions& opt) {
+  check_output_path(opt.heatmap, "--heatmap");
+  if (!opt.shaded.empty()) check_output_path(opt.shaded, "--shaded");
+  if (!opt.compare.empty()) check_output_path(difference_path(opt), "--compare-heatmap");
   auto threads = opt.threads.apply();
   ProgressLine progress;
   const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout());
@@ -45,8 +57,14 @@ void run_render(const RenderOptions& opt) {
   std::vector<Hit> hits;
   std::vector<TraceCounters> counters;
   trace_rays(tree.traced(order), rays, RayQuery::closest, hits, &counters);
-  write_png(opt.heatmap, heatmap_image(counters, cam.width, cam.height, opt.max_steps));
-  if (!opt.shaded.empty()) write_png(opt.shaded, shaded_image(mesh, rays, hits, cam.width, cam.height));
+  OutputGroup outputs;
+  outputs.add(opt.heatmap, [&](const std::filesystem::path& tmp) {
+    write_png(tmp, heatmap_image(counters, cam.width, cam.height, opt.max_steps));
+  });
+  if (!opt.shaded.empty())
+    outputs.add(opt.shaded, [&](const std::filesystem::path& tmp) {
+      write_png(tmp, shaded_image(mesh, rays, hits, cam.width, cam.height));
+    });
 
   double mean_a = 0, mean_b = 0;
   for (const TraceCounters& c : counters) mean_a += c.steps;
@@ -59,13 +77,12 @@ void run_render(const RenderOptions& opt) {
     trace_rays(other.traced(order), rays, RayQuery::closest, hits_b, &counters_b);
     for (const TraceCounters& c : counters_b) mean_b += c.steps;
     mean_b /= double(counters_b.size());
-    diff_path = opt.compare_heatmap;
-    if (diff_path.empty()) {
-      const std::filesystem::path p(opt.heatmap);
-      diff_path = (p.parent_path() / (p.stem().string() + "-diff" + p.extension().string())).string();
-    }
-    write_png(diff_path, difference_image(counters, counters_b, cam.width, cam.height, opt.range));
+    diff_path = difference_path(opt);
+    outputs.add(diff_path, [&](const std::filesystem::path& tmp) {
+      write_png(tmp, difference_image(counters, counters_b, cam.width, cam.height, opt.range));
+    });
   }
+  outputs.commit();
   if (opt.json) {
     nlohmann::json j = {{"bvh", opt.bvh_file}, {"scene", mesh.name}, {"width", cam.width},
                         {"height", cam.height}, {"heatmap", opt.heatmap}, {"mean_steps", mean_a},
@@ -109,9 +126,12 @@ void register_render_command(CLI::App& app) {
   cmd->add_option("--height", opt->height, "Image height")->check(CLI::Range(1u, 16384u))->capture_default_str();
   cmd->add_option("--max-steps", opt->max_steps, "Steps shown as full red (positive)")
       ->check(finite_number())
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
-  cmd->add_option("--range", opt->range, "Step difference shown as full red/blue")->capture_default_str();
+  cmd->add_option("--range", opt->range, "Step difference shown as full red/blue (positive)")
+      ->check(finite_number())
+      ->check(positive_number())
+      ->capture_default_str();
   cmd->add_option("--order", opt->order, "axis | distance")->check(CLI::IsMember({"axis", "distance"}))->capture_default_str();
   opt->camera.add_to(cmd);
   opt->layout.add_to(cmd);
