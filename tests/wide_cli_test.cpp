@@ -90,7 +90,7 @@ TEST_F(WideCli, RenderAndDemoTakeTheLayout) {
     EXPECT_EQ(j["layout"], layout);
     EXPECT_GT(j["mean_steps"].get<double>(), 0.0);
   }
-  CliRun d = run("demo --triangles 2000 --rays 2000 --quick --json --layout bvh4 --images " + (dir_ / "demo").string());
+  CliRun d = run("demo --triangles 4000 --rays 2000 --quick --json --layout bvh4 --images " + (dir_ / "demo").string());
   ASSERT_EQ(d.exit_code, 0) << d.err;
   EXPECT_EQ(nlohmann::json::parse(d.out)["layout"], "bvh4");
   CliRun bad = run("trace " + bvh.string() + " --scene 'builtin?triangles=4000' --layout bvh16");

@@ -14,26 +14,10 @@
 #include <vector>
 
 #include "bvhopt/error.h"
+#include "io/printable_text.h"
 
 namespace bvhopt {
 namespace {
-
-// Text as an error message may show it: control and non-ASCII bytes as \xNN, at most 40
-// characters.
-std::string shown(std::string_view text) {
-  static const char* const kHex = "0123456789abcdef";
-  std::string out;
-  for (unsigned char c : text.substr(0, 40)) {
-    if (c >= 0x20 && c < 0x7f) {
-      out += static_cast<char>(c);
-    } else {
-      out += "\\x";
-      out += kHex[c >> 4];
-      out += kHex[c & 15];
-    }
-  }
-  return text.size() > 40 ? out + "..." : out;
-}
 
 // The next blank-separated word of `line` from `at`.
 std::string_view next_word(std::string_view line, size_t& at) {
@@ -51,10 +35,10 @@ void check_vertex(std::string_view line, size_t at, uint64_t vertex, const std::
     char* end = nullptr;
     errno = 0;
     const float v = std::strtof(word.c_str(), &end);
-    if (end != word.c_str() + word.size()) throw Error(what + "coordinate '" + shown(word) + "' is not a number");
+    if (end != word.c_str() + word.size()) throw Error(what + "coordinate '" + printable(word, 40) + "' is not a number");
     if (!std::isfinite(v))
       throw Error(what + "coordinate " + "xyz"[axis] + " is " + (std::isnan(v) ? "NaN" : "infinite") + " ('" +
-                  shown(word) + "')");
+                  printable(word, 40) + "')");
   }
 }
 
@@ -76,7 +60,7 @@ void check_face(std::string_view line, size_t at, uint64_t vertices, uint64_t li
     int64_t index = 0;
     const auto [ptr, ec] = std::from_chars(v.data(), v.data() + v.size(), index);
     if (v.empty() || ec != std::errc() || ptr != v.data() + v.size())
-      throw Error(place + ": face index '" + shown(word) + "' is not a whole number");
+      throw Error(place + ": face index '" + printable(word, 40) + "' is not a whole number");
     if (index == 0) throw Error(place + ": face index 0 is not a vertex (OBJ indices start at 1)");
     if (index > 0 && uint64_t(index) > vertices) {
       if (forward.empty() || forward.back().line != line_number || forward.back().index < index)
