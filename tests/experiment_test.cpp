@@ -208,8 +208,8 @@ TEST_F(ExperimentRun, TablesHoldTheLibrarysCosts) {
   ASSERT_EQ(table.size(), 7u);
   EXPECT_NEAR(table.at("SAH (sweep) without optimization"), c0, 1e-4);
   EXPECT_NEAR(table.at("SAH + hill climbing (Kensler)"), hill, 1e-4);
-  EXPECT_NEAR(table.at("SAH + insertion (Bittner, as published)"), paper, 1e-4);
-  EXPECT_NEAR(table.at("SAH + insertion, our hybrid form"), hybrid, 1e-4);
+  EXPECT_NEAR(table.at("SAH + insertion (Bittner as published)"), paper, 1e-4);
+  EXPECT_NEAR(table.at("SAH + insertion (our hybrid form)"), hybrid, 1e-4);
   for (const auto& [tree, cost] : table)
     if (tree.find("without") == std::string::npos) {
       const double start = tree.find("median") != std::string::npos

@@ -73,10 +73,10 @@ class Table {
 const char* const kTreeLabels[][2] = {{"sah", "SAH (sweep) without optimization"},
                                       {"hill", "SAH + hill climbing (Kensler)"},
                                       {"anneal", "SAH + annealing (Kensler)"},
-                                      {"insertion_sah", "SAH + insertion (Bittner, as published)"},
-                                      {"insertion_hybrid", "SAH + insertion, our hybrid form"},
+                                      {"insertion_sah", "SAH + insertion (Bittner as published)"},
+                                      {"insertion_hybrid", "SAH + insertion (our hybrid form)"},
                                       {"median", "spatial median without optimization"},
-                                      {"insertion_median", "spatial median + insertion (Bittner, as published)"}};
+                                      {"insertion_median", "spatial median + insertion (Bittner as published)"}};
 
 std::string lower(std::string s) {
   for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
