@@ -17,6 +17,7 @@
 #include "bvhopt/insertion_optimizer.h"
 #include "bvhopt/references.h"
 #include "bvhopt/sweep_sah_builder.h"
+#include "bvhopt/atomic_file.h"
 #include "cli_common.h"
 #include "commands.h"
 #include "optimize_progress.h"
@@ -106,11 +107,7 @@ BakeResult bake(const BakeOptions& opt) {
   // The file holds the binary tree: trace and render rebuild their wide layout (--layout
   // bvh4|bvh8, wide_bvh.h) from it on load. A stored wide layout would be written here.
 
-  BvhFileInfo info;
-  info.cost = cost;
-  info.scene_name = mesh.name;
-  info.scene_triangles = r.triangles;
-  info.method = "sweep+insertion+collapse";
+  const BvhFileInfo info = scene_info(mesh, cost, "sweep+insertion+collapse");
   progress.update("writing " + opt.output, true);
   refs = make_references(mesh);
   write_bvh_file(opt.output, bvh, refs, info);
@@ -177,6 +174,7 @@ void register_bake_command(CLI::App& app) {
   cmd->add_option("-o,--output", opt->output, "BVH file to write")->required();
   cmd->add_flag("--json", opt->json, "Print the summary as JSON");
   cmd->callback([opt] {
+    check_output_path(opt->output, "-o");
     auto threads = opt->threads.apply();
     const BakeResult r = bake(*opt);
     if (opt->json)

@@ -9,6 +9,7 @@
 #include "bvhopt/finalize.h"
 #include "bvhopt/leaf_dedup.h"
 #include "bvhopt/stats.h"
+#include "bvhopt/atomic_file.h"
 #include "cli_common.h"
 #include "commands.h"
 
@@ -60,6 +61,7 @@ void print_build_summary(const BuildCommandOptions& opt, const Mesh& mesh, const
 }
 
 void run_build(const BuildCommandOptions& opt) {
+  check_output_path(opt.output, "-o");
   auto threads = opt.threads.apply();
   ProgressLine progress;
   progress.update("loading " + opt.scene.spec, true);
@@ -81,11 +83,7 @@ void run_build(const BuildCommandOptions& opt) {
   if (opt.evh.enabled) dedup_leaf_references(bvh, refs);
   double build_s = build_clock.seconds();
 
-  BvhFileInfo info;
-  info.cost = options.cost;
-  info.scene_name = mesh.name;
-  info.scene_triangles = mesh.triangle_count();
-  info.method = opt.evh.enabled ? "evh+" + opt.builder : opt.builder;
+  const BvhFileInfo info = scene_info(mesh, options.cost, opt.evh.enabled ? "evh+" + opt.builder : opt.builder);
   progress.update("writing " + opt.output, true);
   write_bvh_file(opt.output, bvh, refs, info);
   progress.finish();

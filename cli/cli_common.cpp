@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <iomanip>
@@ -45,6 +46,38 @@ CLI::Validator finite_number() {
         return std::string();
       },
       "FINITE");
+}
+
+namespace {
+
+CLI::Validator compared_to_zero(bool allow_zero) {
+  return CLI::Validator(
+      [allow_zero](std::string& text) {
+        double value = 0.0;
+        if (!CLI::detail::lexical_cast(text, value)) return std::string("'" + text + "' is not a number");
+        if (allow_zero ? value >= 0.0 : value > 0.0) return std::string();
+        return std::string("'" + text + "' must be " + (allow_zero ? ">= 0" : "> 0"));
+      },
+      allow_zero ? "NUMBER >= 0" : "NUMBER > 0");
+}
+
+}  // namespace
+
+CLI::Validator positive_number() { return compared_to_zero(false); }
+CLI::Validator non_negative_number() { return compared_to_zero(true); }
+
+CLI::Validator whole_number(uint64_t lo, uint64_t hi) {
+  const std::string range = std::to_string(lo) + " to " + std::to_string(hi);
+  return CLI::Validator(
+      [lo, hi, range](std::string& text) {
+        uint64_t value = 0;
+        const char* end = text.data() + text.size();
+        const auto [ptr, ec] = std::from_chars(text.data(), end, value);
+        if (text.empty() || ec != std::errc() || ptr != end || value < lo || value > hi)
+          return std::string("'" + text + "' is not a whole number from " + range);
+        return std::string();
+      },
+      "N in " + range);
 }
 
 namespace {

@@ -22,6 +22,16 @@ namespace bvhopt::cli {
 // false). Put it before the range check: `->check(finite_number())->check(CLI::Range(...))`.
 CLI::Validator finite_number();
 
+// A number > 0 (or >= 0), said in those words: CLI11's PositiveNumber and NonNegativeNumber
+// print the largest double, 309 digits, as the range's upper bound. Put finite_number()
+// first.
+CLI::Validator positive_number();
+CLI::Validator non_negative_number();
+
+// A whole number written in digits from `lo` to `hi` (CLI11 reads "-1" into an unsigned
+// option as 2^64 - 1).
+CLI::Validator whole_number(uint64_t lo, uint64_t hi);
+
 // --threads N (default: all cores). Keep the returned object alive for the command's run.
 struct ThreadsOption {
   int threads = 0;

@@ -7,6 +7,7 @@
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
 #include "bvhopt/leaf_dedup.h"
+#include "bvhopt/atomic_file.h"
 #include "cli_common.h"
 #include "commands.h"
 
@@ -25,6 +26,7 @@ struct CompactOptions {
 // Collapses the tree of the input file, removes repeated triangles from its leaves, writes
 // the output file, and prints the costs before and after.
 void run_compact(const CompactOptions& opt) {
+  check_output_path(opt.output, "-o");
   Stopwatch load_clock;
   BvhFile file = read_bvh_file(opt.input);
   const double load_s = load_clock.seconds();
@@ -87,6 +89,7 @@ void register_compact_command(CLI::App& app) {
   cmd->add_option("input", opt->input, "BVH file to compact")->required()->type_name("IN.bvh");
   cmd->add_option("--max-leaf-size", opt->max_leaf_size,
                   "Never make a leaf of more references than this (0: no limit, the paper's ocost)")
+      ->check(whole_number(0, UINT32_MAX))
       ->capture_default_str();
   cmd->add_option("-o,--output", opt->output, "BVH file to write")->required()->type_name("OUT.bvh");
   cmd->add_flag("--json", opt->json, "Print the summary as JSON");

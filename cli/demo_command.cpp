@@ -23,6 +23,7 @@
 #include "bvhopt/stats.h"
 #include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
+#include "bvhopt/atomic_file.h"
 #include "cli_common.h"
 #include "trace_common.h"
 #include "commands.h"
@@ -226,6 +227,7 @@ void print_demo(const DemoRun& run, const std::filesystem::path& unopt_png, cons
 }
 
 void run_demo(const DemoOptions& opt) {
+  check_output_folder(opt.images, "--images");
   auto threads = opt.threads.apply();
   ProgressLine progress;
   DemoRun run{opt, opt.cost.model(), progress};
@@ -260,13 +262,14 @@ void register_demo_command(CLI::App& app) {
   auto opt = std::make_shared<DemoOptions>();
   CLI::App* cmd = app.add_subcommand(
       "demo", "Every builder and optimizer on the built-in scene: cost, time and rays per second, plus heat maps");
-  cmd->add_option("--triangles", opt->triangles, "Size of the built-in scene")
+  cmd->add_option("--triangles", opt->triangles, "Size of the built-in scene (at least its architecture, 3,512 triangles)")
       ->check(CLI::Range(uint64_t{100}, uint64_t{100'000'000}))
       ->capture_default_str();
-  cmd->add_option("--seed", opt->seed, "Seed of the built-in scene and of the optimizers")->capture_default_str();
+  cmd->add_option("--seed", opt->seed, "Seed of the built-in scene and of the optimizers")->check(whole_number(0, UINT64_MAX))->capture_default_str();
   cmd->add_option("--images", opt->images, "Folder for the heat maps of the unoptimized and the best tree")
       ->capture_default_str();
-  cmd->add_option("--rays", opt->rays, "Rays per set (default: 1024x768 primary rays and 500,000 random rays)");
+  cmd->add_option("--rays", opt->rays, "Rays per set (default: 1024x768 primary rays and 500,000 random rays)")
+      ->check(whole_number(1, kMaxRayCount));
   cmd->add_flag("--quick", opt->quick, "Shorter annealing schedule (250 passes instead of 1250)");
   opt->cost.add_to(cmd);
   opt->layout.add_to(cmd);

@@ -13,7 +13,7 @@ void EvhOption::add_to(CLI::App* app) {
   app->add_option("--evh-max-ratio", max_ratio,
                   "At most this many references per triangle in all; t is lowered until it fits (0: no limit)")
       ->check(finite_number())
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative_number())
       ->capture_default_str();
 }
 

@@ -10,6 +10,8 @@
 
 #include "bvhopt/error.h"
 #include "experiment/experiment.h"
+#include "bvhopt/ray_sets.h"
+#include "bvhopt/atomic_file.h"
 #include "cli_common.h"
 #include "commands.h"
 #include "trace_common.h"
@@ -121,6 +123,7 @@ ExperimentConfig experiment_config(const ExperimentOptions& opt, bool budget_giv
 
 void run_experiment_command(const ExperimentOptions& opt, bool budget_given, bool rays_given) {
   ExperimentConfig config = experiment_config(opt, budget_given, rays_given);
+  check_output_folder(opt.out, "--out");
   auto limit = opt.threads.apply();
   config.threads = opt.threads.effective();
 
@@ -143,6 +146,7 @@ void run_experiment_command(const ExperimentOptions& opt, bool budget_given, boo
 }
 
 void run_merge_command(const ExperimentOptions& opt) {
+  check_output_folder(opt.merge_out, "--out");
   std::vector<fs::path> parts(opt.merge_dirs.begin(), opt.merge_dirs.end());
   merge_experiments(parts, opt.merge_out, find_plot_script(opt.plot_script));
   std::cout << "merged " << parts.size() << " parts into " << (fs::path(opt.merge_out) / "report.md").string() << "\n";
@@ -161,8 +165,10 @@ void register_experiment_command(CLI::App& app) {
   cmd->add_option("--time-budget", opt->time_budget,
                   "Seconds per scene for the optimizers; annealing's schedule is scaled to fit (0: the paper's full schedule)")
       ->capture_default_str();
-  cmd->add_option("--seed", opt->seed, "Seed of every random choice")->capture_default_str();
-  cmd->add_option("--rays", opt->rays, "Rays per set (primary, random, ao, path)")->capture_default_str();
+  cmd->add_option("--seed", opt->seed, "Seed of every random choice")->check(whole_number(0, UINT64_MAX))->capture_default_str();
+  cmd->add_option("--rays", opt->rays, "Rays per set (primary, random, ao, path)")
+      ->check(whole_number(1, kMaxRayCount))
+      ->capture_default_str();
   cmd->add_option("--shard", opt->shard, "Run only part I of N of the scene x protocol grid (join with `merge`)")
       ->type_name("I/N");
   cmd->add_flag("--quick", opt->quick, "Small settings for a trial run: 20k rays, 4 frames, t in {10, 14}, 10 s budget");

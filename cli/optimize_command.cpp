@@ -76,13 +76,14 @@ std::string joined(const std::vector<std::string>& names) {
 void add_method_options(CLI::App* cmd, OptimizeOptions& opt) {
   cmd->add_option("--schedule-passes", opt.anneal.schedule_passes,
                   "anneal: schedule length N in passes (then the quench)")
+      ->check(whole_number(1, UINT32_MAX))
       ->capture_default_str();
   cmd->add_option("--period", opt.anneal.period, "anneal: period f of the sine schedule, in passes")
-      ->check(CLI::PositiveNumber)
+      ->check(whole_number(1, UINT32_MAX))
       ->capture_default_str();
   cmd->add_option("--h", opt.anneal.h, "anneal: hottest temperature, in Kensler's units (0.8-2.2)")
       ->check(finite_number())
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative_number())
       ->capture_default_str();
   cmd->add_flag("--no-keep-best", opt.no_keep_best,
                 "anneal: return the last tree, not the best seen at the end of a pass");
@@ -101,10 +102,11 @@ void add_method_options(CLI::App* cmd, OptimizeOptions& opt) {
       ->capture_default_str();
   cmd->add_option("--random-after", opt.insertion.random_after,
                   "insertion: passes without improvement before random selection (p_R)")
+      ->check(whole_number(0, UINT32_MAX))
       ->capture_default_str();
   cmd->add_option("--stop-after", opt.insertion.stop_after,
                   "insertion: passes without improvement before stopping (p_T)")
-      ->check(CLI::PositiveNumber)
+      ->check(whole_number(1, UINT32_MAX))
       ->capture_default_str();
 }
 
@@ -167,14 +169,11 @@ Loaded load_input(const SceneOption& scene, const EvhOption& evh, const CostMode
   sweep.leaf.max_leaf_size = 1;
   in.bvh = build_sweep_sah(in.refs, sweep);
   in.build_seconds = build_clock.seconds();
-  in.info.cost = cost;
-  in.info.scene_name = mesh.name;
-  in.info.scene_triangles = mesh.triangle_count();
-  in.info.method = evh.enabled ? "evh+sweep" : "sweep";
+  in.info = scene_info(mesh, cost, evh.enabled ? "evh+sweep" : "sweep");
   return in;
 }
 
-void write_trace_csv(const std::string& path, const OptimizeReport& report) {
+std::string trace_csv(const OptimizeReport& report) {
   std::ostringstream f;
   f.precision(10);
   f << "pass,cost,best_cost,temperature,moves,seconds\n";
@@ -182,7 +181,7 @@ void write_trace_csv(const std::string& path, const OptimizeReport& report) {
   for (const PassRecord& p : report.trace)
     f << p.pass << ',' << p.cost << ',' << p.best_cost << ',' << p.temperature << ',' << p.moves << ',' << p.seconds
       << '\n';
-  write_text_atomically(path, f.str());
+  return f.str();
 }
 
 void print_report_json(const OptimizeOptions& opt, const Loaded& in, const BvhFileInfo& info, const OptimizeReport& report,
@@ -226,6 +225,9 @@ void print_summary(const OptimizeOptions& opt, const Loaded& in, const BvhFileIn
 }
 
 void run_optimize(const OptimizeOptions& opt) {
+  // Before the work: a typo in an output path must not cost the optimization.
+  check_output_path(opt.output, "-o");
+  if (!opt.trace_path.empty()) check_output_path(opt.trace_path, "--cost-trace");
   auto threads = opt.threads.apply();
   Loaded in = load_input(opt.input, opt.evh, opt.cost.model(), opt.cost_given);
   const std::optional<OptimizerMethod> method = parse_optimizer_method(opt.method);
@@ -244,10 +246,13 @@ void run_optimize(const OptimizeOptions& opt) {
   OptimizeReport report = run_method(in.bvh, *method, opt, shared);
   progress.finish();
 
-  if (!opt.trace_path.empty()) write_trace_csv(opt.trace_path, report);
   BvhFileInfo info = in.info;
   info.method = (info.method.empty() ? std::string("unknown") : info.method) + "+" + opt.method;
-  write_bvh_file(opt.output, in.bvh, in.refs, info);
+  // Both outputs or neither.
+  OutputGroup outputs;
+  outputs.add(opt.output, [&](const std::filesystem::path& tmp) { write_bvh_file(tmp, in.bvh, in.refs, info); });
+  if (!opt.trace_path.empty()) outputs.add_text(opt.trace_path, trace_csv(report));
+  outputs.commit();
   const double ocost = optimal_collapse_cost(in.bvh, info.cost);
   if (opt.json)
     print_report_json(opt, in, info, report, ocost);
@@ -273,18 +278,19 @@ void register_optimize_command(CLI::App& app) {
   }
   cmd->add_option("--method", opt->method, help)->check(CLI::IsMember(names))->capture_default_str();
   cmd->add_option("--passes", opt->shared.limits.max_passes, "Stop after this many passes (0: no limit)")
+      ->check(whole_number(0, UINT32_MAX))
       ->capture_default_str();
   cmd->add_option("--time-limit", opt->shared.limits.time_limit,
                   "Stop after the pass that reaches this many seconds (0: none)")
       ->check(finite_number())
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative_number())
       ->type_name("S");
   cmd->add_option("--time-budget", opt->time_budget,
                   "Like --time-limit (the best tree seen is kept), in seconds or, for a scene, as a multiple of "
                   "its build time: 5x")
       ->type_name("S|Nx")
       ->excludes("--time-limit");
-  cmd->add_option("--seed", opt->shared.seed, "Seed of every random choice")->capture_default_str();
+  cmd->add_option("--seed", opt->shared.seed, "Seed of every random choice")->check(whole_number(0, UINT64_MAX))->capture_default_str();
   cmd->add_option("--cost-trace", opt->trace_path, "Write the cost after every pass as CSV")->type_name("FILE.csv");
   opt->evh.add_to(cmd);
   opt->cost.add_to(cmd);

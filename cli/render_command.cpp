@@ -6,6 +6,7 @@
 
 #include "bvhopt/font.h"
 #include "bvhopt/image_legend.h"
+#include "bvhopt/atomic_file.h"
 #include "bvhopt/images.h"
 #include "bvhopt/png_file.h"
 #include "bvhopt/ray_measure.h"
@@ -68,9 +69,26 @@ void write_picture(const std::string& path, const LegendImage& picture, bool leg
   write_png(path, picture.image);
 }
 
+// Where the difference heat map goes: --compare-heatmap, or OUT.png with -diff.
+std::string difference_path(const RenderOptions& opt) {
+  return opt.compare_heatmap.empty() ? beside(opt.heatmap, "-diff") : opt.compare_heatmap;
+}
+
+// Where the --compare tree's heat map goes: --other-heatmap, or OUT.png with -other.
+std::string other_path(const RenderOptions& opt) {
+  return opt.other_heatmap.empty() ? beside(opt.heatmap, "-other") : opt.other_heatmap;
+}
+
 // Renders the heat map (and the shaded image, and with --compare the other tree's heat map
-// on the same scale and the difference) of primary rays from the camera, and prints a summary.
+// on the same scale and the difference) of primary rays from the camera, and prints a
+// summary. Every output is checked before the work and the images are written all or none.
 void run_render(const RenderOptions& opt) {
+  check_output_path(opt.heatmap, "--heatmap");
+  if (!opt.shaded.empty()) check_output_path(opt.shaded, "--shaded");
+  if (!opt.compare.empty()) {
+    check_output_path(difference_path(opt), "--compare-heatmap");
+    check_output_path(other_path(opt), "--other-heatmap");
+  }
   auto threads = opt.threads.apply();
   ProgressLine progress;
   const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout());
@@ -98,10 +116,16 @@ void run_render(const RenderOptions& opt) {
     return (name.empty() ? std::filesystem::path(file).filename().string() : name) + "  \u00b7  " + mesh.name +
            "  \u00b7  " + opt.layout.name + " layout";
   };
-  write_picture(opt.heatmap,
-                heatmap_with_legend(a.counters, cam.width, cam.height, max_steps, title(opt.name, opt.bvh_file), text),
-                !opt.no_legend);
-  if (!opt.shaded.empty()) write_png(opt.shaded, shaded_image(mesh, rays, a.hits, cam.width, cam.height));
+  OutputGroup outputs;
+  outputs.add(opt.heatmap, [&](const std::filesystem::path& tmp) {
+    write_picture(tmp.string(),
+                  heatmap_with_legend(a.counters, cam.width, cam.height, max_steps, title(opt.name, opt.bvh_file), text),
+                  !opt.no_legend);
+  });
+  if (!opt.shaded.empty())
+    outputs.add(opt.shaded, [&](const std::filesystem::path& tmp) {
+      write_png(tmp, shaded_image(mesh, rays, a.hits, cam.width, cam.height));
+    });
 
   size_t hits = 0;
   for (const Hit& h : a.hits) hits += h.hit();
@@ -109,26 +133,31 @@ void run_render(const RenderOptions& opt) {
   const double mean_a = mean_steps(a.counters);
   double mean_b = 0.0;
   float range = opt.range;
-  std::string diff_path, other_path;
+  std::string diff_path, other_file;
+  const auto name_of = [](const std::string& name, const std::string& file) {
+    return name.empty() ? std::filesystem::path(file).filename().string() : name;
+  };
   if (b) {
     mean_b = mean_steps(b->counters);
-    other_path = opt.other_heatmap.empty() ? beside(opt.heatmap, "-other") : opt.other_heatmap;
-    write_picture(other_path,
-                  heatmap_with_legend(b->counters, cam.width, cam.height, max_steps, title(opt.compare_name, opt.compare),
-                                      text),
-                  !opt.no_legend);
+    other_file = other_path(opt);
+    outputs.add(other_file, [&](const std::filesystem::path& tmp) {
+      write_picture(tmp.string(),
+                    heatmap_with_legend(b->counters, cam.width, cam.height, max_steps,
+                                        title(opt.compare_name, opt.compare), text),
+                    !opt.no_legend);
+    });
     if (!opt.range_given && !fixed) range = difference_scale(a.counters, b->counters);
-    diff_path = opt.compare_heatmap.empty() ? beside(opt.heatmap, "-diff") : opt.compare_heatmap;
-    const auto name_of = [](const std::string& name, const std::string& file) {
-      return name.empty() ? std::filesystem::path(file).filename().string() : name;
-    };
-    write_picture(diff_path,
-                  difference_with_legend(a.counters, b->counters, cam.width, cam.height, range,
-                                         "steps of " + name_of(opt.compare_name, opt.compare) + " minus " +
-                                             name_of(opt.name, opt.bvh_file) + "  \u00b7  " + mesh.name,
-                                         text),
-                  !opt.no_legend);
+    diff_path = difference_path(opt);
+    outputs.add(diff_path, [&, range](const std::filesystem::path& tmp) {
+      write_picture(tmp.string(),
+                    difference_with_legend(a.counters, b->counters, cam.width, cam.height, range,
+                                           "steps of " + name_of(opt.compare_name, opt.compare) + " minus " +
+                                               name_of(opt.name, opt.bvh_file) + "  \u00b7  " + mesh.name,
+                                           text),
+                    !opt.no_legend);
+    });
   }
+  outputs.commit();
   if (opt.json) {
     nlohmann::json j = {{"bvh", opt.bvh_file},   {"scene", mesh.name},         {"width", cam.width},
                         {"height", cam.height},  {"heatmap", opt.heatmap},     {"mean_steps", mean_a},
@@ -140,7 +169,7 @@ void run_render(const RenderOptions& opt) {
       j["compare_mean_steps"] = mean_b;
       j["difference_heatmap"] = diff_path;
       j["difference_range"] = range;
-      j["other_heatmap"] = other_path;
+      j["other_heatmap"] = other_file;
     }
     print_json(j);
     return;
@@ -153,7 +182,7 @@ void run_render(const RenderOptions& opt) {
   if (!opt.shaded.empty()) std::cout << "shaded     " << opt.shaded << "\n";
   if (b)
     std::cout << "compare    " << opt.compare << ": mean " << format_double(mean_b, 1) << " steps/pixel, heat map "
-              << other_path << " (same scale); difference " << diff_path << " (red: more steps than " << opt.bvh_file
+              << other_file << " (same scale); difference " << diff_path << " (red: more steps than " << opt.bvh_file
               << ", full at +-" << range << ")\n";
 }
 
@@ -188,14 +217,14 @@ void register_render_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--max-steps", opt->max_steps, "Steps shown as full red with --scale fixed (giving it implies fixed)")
       ->check(finite_number())
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str()
       ->each([opt](const std::string&) { opt->scale = "fixed"; });
   cmd->add_option("--range", opt->range,
                   "Step difference shown as full red/blue (default: the 99th percentile of |difference|, rounded up; "
                   "50 with --scale fixed)")
       ->check(finite_number())
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->each([opt](const std::string&) { opt->range_given = true; })
       ->capture_default_str();
   cmd->add_flag("--no-legend", opt->no_legend, "Pictures without colour bar and caption (one pixel per ray only)");

@@ -163,6 +163,7 @@ void save_hits(const std::string& path, const AnyTracer& traced, const RaySet& s
 // Loads the tree and the rays, times them on one thread and on all, checks a sample against
 // brute force, and reports; throws Error when traversal and brute force disagree.
 void run_trace(const TraceOptions& opt) {
+  if (!opt.save_rays.empty()) check_output_path(opt.save_rays, "--save-rays");
   auto threads = opt.threads.apply();
   ProgressLine progress;
   const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout());
@@ -216,14 +217,20 @@ void register_trace_command(CLI::App& app) {
   cmd->add_option("--rays", opt->rays, "Ray set: primary | random | ao | path | shadow")
       ->check(CLI::IsMember({"primary", "random", "ao", "path", "shadow"}))
       ->capture_default_str();
-  cmd->add_option("--count", opt->count, "Rays (default: 1024x768 primary, 1,000,000 otherwise)")->type_name("N");
-  cmd->add_option("--seed", opt->seed, "Seed of the ray set")->capture_default_str();
+  cmd->add_option("--count", opt->count, "Rays (default: 1024x768 primary, 1,000,000 otherwise)")
+      ->check(whole_number(1, kMaxRayCount))
+      ->type_name("N");
+  cmd->add_option("--seed", opt->seed, "Seed of the ray set")
+      ->check(whole_number(0, UINT64_MAX))
+      ->capture_default_str();
   cmd->add_option("--width", opt->width, "Camera image width")->check(CLI::Range(1u, 16384u))->capture_default_str();
   cmd->add_option("--height", opt->height, "Camera image height")->check(CLI::Range(1u, 16384u))->capture_default_str();
   cmd->add_option("--order", opt->order, "Near child first by: axis (split axis and ray sign) | distance")
       ->check(CLI::IsMember({"axis", "distance"}))
       ->capture_default_str();
-  cmd->add_option("--check", opt->check, "Rays checked against brute force (0: none)")->capture_default_str();
+  cmd->add_option("--check", opt->check, "Rays checked against brute force (0: none)")
+      ->check(whole_number(0, kMaxRayCount))
+      ->capture_default_str();
   cmd->add_option("--repeats", opt->repeats, "Timed passes (median reported)")->check(CLI::Range(1, 100))->capture_default_str();
   cmd->add_option("--save-rays", opt->save_rays, "Write the ray set to this ray file")->type_name("FILE");
   cmd->add_option("--save-hits", opt->save_hits,

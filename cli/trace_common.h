@@ -55,14 +55,11 @@ struct LoadedTree {
   AnyTracer traced(ChildOrder order) const { return wide ? AnyTracer(*wide) : AnyTracer(*tracer, order); }
 };
 
-// Reads the BVH file and refuses a scene whose triangle count differs from the one the
-// tree was built over (the ids would point at the wrong triangles, or past the end).
+// Reads the BVH file and refuses a scene other than the one the tree was built over
+// (check_tree_matches_scene: triangle count, geometry fingerprint).
 inline BvhFile read_tree_for_scene(const std::string& file, const Mesh& mesh) {
   BvhFile f = read_bvh_file(file);
-  if (f.info.scene_triangles != mesh.triangle_count())
-    throw Error(file + ": built over scene '" + f.info.scene_name + "' with " +
-                std::to_string(f.info.scene_triangles) + " triangles, but scene '" + mesh.name + "' has " +
-                std::to_string(mesh.triangle_count()) + " (pass the scene the tree was built from)");
+  check_tree_matches_scene(file, f.info, mesh);
   return f;
 }
 

@@ -107,14 +107,17 @@ TEST_F(BadInput, UnknownExtension) {
 TEST_F(BadInput, EmptyFile) { expect_rejected(write("empty.obj", ""), {"empty file"}); }
 
 TEST_F(BadInput, ObjIndexOutOfRange) {
-  expect_rejected(write("range.obj", kTriangleVertices + "f 1 2 9\n"), {"index out of range"});
-  expect_rejected(write("negative.obj", kTriangleVertices + "f 1 2 -7\n"), {"index out of range"});
-  expect_rejected(write("zero.obj", kTriangleVertices + "f 0 1 2\n"), {"face index"});
+  // Each error says the line (assimp's did not).
+  expect_rejected(write("range.obj", kTriangleVertices + "f 1 2 9\n"), {"line 4", "face index 9 out of range"});
+  expect_rejected(write("negative.obj", kTriangleVertices + "f 1 2 -7\n"), {"line 4", "face index -7 out of range"});
+  expect_rejected(write("zero.obj", kTriangleVertices + "f 0 1 2\n"), {"line 4", "face index 0"});
+  expect_rejected(write("late.obj", kTriangleVertices + "f 1 2 3\nf 1 2 3\nf 2 3 4\nv 1 1 1\nf 1 9 2\n"),
+                  {"line 8", "face index 9 out of range (the file has 4 vertices)"});
 }
 
 TEST_F(BadInput, ObjNaNAndInfiniteCoordinates) {
-  expect_rejected(write("nan.obj", "v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n"), {"vertex", "coordinate y is NaN"});
-  expect_rejected(write("inf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n"), {"vertex", "coordinate z is infinite"});
+  expect_rejected(write("nan.obj", "v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n"), {"line 2", "vertex", "coordinate y is NaN"});
+  expect_rejected(write("inf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n"), {"line 3", "vertex", "coordinate z is infinite"});
   // Too large for a float: overflows to infinity on reading.
   expect_rejected(write("huge.obj", "v 1e39 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"), {"coordinate x is infinite"});
 }
@@ -291,6 +294,29 @@ TEST_F(BadInput, TruncatedGlb) {
   // Cut inside the binary buffer, and cut inside the JSON chunk.
   expect_rejected(write("half.glb", bytes.substr(0, bytes.size() / 2)), {});
   expect_rejected(write("head.glb", bytes.substr(0, 4000)), {});
+}
+
+// Found by fuzz/scene_file_fuzzer: accessor 1 starts one byte into its 36-byte buffer view
+// and needs all 36, so assimp copied one byte past its buffer (ASan). The pre-check refuses it
+// and says which accessor; the same file with the offset right loads.
+TEST_F(BadInput, GltfAccessorPastItsBufferViewIsRefused) {
+  const std::string head =
+      R"({"asset":{"version":"2.0"},"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],"meshes":[{"primitives":[{"attributes":)"
+      R"({"POSITION":1},"indices":0}]}],"buffers":[{"uri":"data:application/octet-stream;base64,)"
+      R"(AAABAAIAAAAAAAAAAAAAAAAAAAAAAIA/AAAAAAAAAAAAAAAAAACAPwAAAAA=","byteLength":44}],"bufferViews":[{"buffer":0,)"
+      R"("byteOffset":0,"byteLength":6,"target":34963},{"buffer":0,"byteOffset":8,"byteLength":36,"target":34962}],)"
+      R"("accessors":[{"bufferView":0,"byteOffset":0,"componentType":5123,"count":3,"type":"SCALAR","max":[2],"min":[0]},)"
+      R"({"bufferView":1,"byteOffset":)";
+  const std::string tail = R"(,"componentType":5126,"count":3,"type":"VEC3","max":[1,1,0],"min":[0,0,0]}]})";
+  expect_rejected(write("past.gltf", head + "1" + tail), {"accessor 1", "run past bufferView 1 (36 bytes)"});
+  EXPECT_EQ(load_mesh_file(write("fits.gltf", head + "0" + tail)).triangle_count(), 1u);
+  // A buffer view past its buffer, and a buffer longer than its data.
+  std::string view_past = head + "0" + tail;
+  view_past.replace(view_past.find(R"("byteOffset":8,"byteLength":36)"), 30, R"("byteOffset":9,"byteLength":36)");
+  expect_rejected(write("view.gltf", view_past), {"bufferView 1", "run past its buffer's 44 bytes"});
+  std::string short_data = head + "0" + tail;
+  short_data.replace(short_data.find(R"("byteLength":44)"), 15, R"("byteLength":48)");
+  expect_rejected(write("short.gltf", short_data), {"buffer 0", "byteLength 48 but only 44 bytes of data"});
 }
 
 TEST_F(BadInput, GoodFileStillLoads) {

@@ -31,7 +31,7 @@ TEST_F(Cli, NoSubcommandIsAnError) {
 
 TEST_F(Cli, BuildThenStatsAgreeOnTheCost) {
   fs::path bvh = dir_ / "scene.bvh";
-  CliRun b = run("build 'builtin?triangles=3000' --builder binned --json -o " + bvh.string());
+  CliRun b = run("build 'builtin?triangles=4000' --builder binned --json -o " + bvh.string());
   ASSERT_EQ(b.exit_code, 0) << b.err;
   ASSERT_TRUE(fs::exists(bvh));
   auto built = nlohmann::json::parse(b.out);
@@ -83,7 +83,7 @@ TEST_F(Cli, CorruptBvhFileIsRejectedWithItsName) {
 
 TEST_F(Cli, FailedWriteLeavesNothingBehind) {
   fs::path target = dir_ / "missing_dir" / "out.bvh";
-  CliRun r = run("build 'builtin?triangles=1000' -o " + target.string());
+  CliRun r = run("build 'builtin?triangles=4000' -o " + target.string());
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_FALSE(fs::exists(dir_ / "missing_dir"));
   EXPECT_NE(r.err.find("out.bvh"), std::string::npos) << r.err;
@@ -134,7 +134,7 @@ TEST_F(Cli, EvhBuildMakesTheReferencesInfoPredicts) {
 
 TEST_F(Cli, EvhOnABvhFileIsRefused) {
   fs::path bvh = dir_ / "a.bvh";
-  ASSERT_EQ(run("build 'builtin?triangles=2000' -o " + bvh.string()).exit_code, 0);
+  ASSERT_EQ(run("build 'builtin?triangles=4000' -o " + bvh.string()).exit_code, 0);
   CliRun r = run("optimize " + bvh.string() + " --evh --method hill-climb -o " + (dir_ / "b.bvh").string());
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("--evh"), std::string::npos) << r.err;
@@ -164,7 +164,7 @@ TEST_F(Cli, MissingBvhFileIsBadInputNotUsage) {
 // refuse it, and infinity, by name.
 TEST_F(Cli, NonFiniteNumbersAreRefusedByName) {
   fs::path bvh = dir_ / "t.bvh";
-  ASSERT_EQ(run("build 'builtin?triangles=2000' -o " + bvh.string()).exit_code, 0);
+  ASSERT_EQ(run("build 'builtin?triangles=4000' -o " + bvh.string()).exit_code, 0);
   const std::string out = " -o " + (dir_ / "o.bvh").string();
   const std::pair<std::string, std::string> cases[] = {
       {"build builtin --ct nan" + out, "--ct"},
@@ -173,11 +173,11 @@ TEST_F(Cli, NonFiniteNumbersAreRefusedByName) {
       {"optimize " + bvh.string() + " --method insertion --batch nan" + out, "--batch"},
       {"optimize " + bvh.string() + " --time-limit nan" + out, "--time-limit"},
       {"build builtin --evh --evh-max-ratio nan" + out, "--evh-max-ratio"},
-      {"render " + bvh.string() + " --scene 'builtin?triangles=2000' --max-steps nan --heatmap " +
+      {"render " + bvh.string() + " --scene 'builtin?triangles=4000' --max-steps nan --heatmap " +
            (dir_ / "h.png").string(), "--max-steps"},
-      {"render " + bvh.string() + " --scene 'builtin?triangles=2000' --max-steps 0 --heatmap " +
+      {"render " + bvh.string() + " --scene 'builtin?triangles=4000' --max-steps 0 --heatmap " +
            (dir_ / "h.png").string(), "--max-steps"},
-      {"render " + bvh.string() + " --scene 'builtin?triangles=2000' --max-steps -5 --heatmap " +
+      {"render " + bvh.string() + " --scene 'builtin?triangles=4000' --max-steps -5 --heatmap " +
            (dir_ / "h.png").string(), "--max-steps"},
   };
   for (const auto& [command, option] : cases) {
@@ -189,7 +189,7 @@ TEST_F(Cli, NonFiniteNumbersAreRefusedByName) {
 
 // oneTBB never runs more threads than there are cores, so that is what is reported.
 TEST_F(Cli, ThreadsAboveTheCoreCountAreReportedAsRun) {
-  CliRun r = run("build 'builtin?triangles=2000' --threads 4096 -o " + (dir_ / "t.bvh").string());
+  CliRun r = run("build 'builtin?triangles=4000' --threads 4096 -o " + (dir_ / "t.bvh").string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.out.find("4096 threads"), std::string::npos) << r.out;
 }

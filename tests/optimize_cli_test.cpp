@@ -68,7 +68,7 @@ TEST_F(OptimizeCli, SceneToAnnealedFileWithTraceAndJson) {
 
 TEST_F(OptimizeCli, BvhFileInputHillClimbAndPassLimit) {
   const fs::path a = dir_ / "a.bvh", b = dir_ / "b.bvh";
-  ASSERT_EQ(run("optimize 'builtin:atrium?triangles=3000' --method hill-climb --passes 1 -o " + a.string()), 0);
+  ASSERT_EQ(run("optimize 'builtin:atrium?triangles=4000' --method hill-climb --passes 1 -o " + a.string()), 0);
   std::string out;
   ASSERT_EQ(run("optimize " + a.string() + " --method hill-climb --json -o " + b.string(), &out), 0);
   nlohmann::json j = nlohmann::json::parse(out);
@@ -148,7 +148,7 @@ TEST_F(OptimizeCli, BadInputsAreErrorsNamingTheInput) {
   std::ofstream(junk) << "not a bvh file";
   EXPECT_EQ(run("optimize " + junk.string() + " -o " + (dir_ / "x.bvh").string(), nullptr, &err), 1);
   EXPECT_NE(err.find("junk.bvh"), std::string::npos) << err;
-  EXPECT_NE(run("optimize 'builtin:atrium?triangles=1000' --method nonsense -o " + (dir_ / "x.bvh").string()), 0);
+  EXPECT_NE(run("optimize 'builtin:atrium?triangles=4000' --method nonsense -o " + (dir_ / "x.bvh").string()), 0);
 }
 
 }  // namespace

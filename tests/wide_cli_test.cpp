@@ -44,7 +44,7 @@ TEST_F(WideCli, TraceEveryLayoutAgreesWithBruteForceAndReportsTheIsa) {
 
 TEST_F(WideCli, StatsReportsTheWideSahCosts) {
   const fs::path bvh = dir_ / "s.bvh";
-  ASSERT_EQ(run("build 'builtin?triangles=3000' -o " + bvh.string()).exit_code, 0);
+  ASSERT_EQ(run("build 'builtin?triangles=4000' -o " + bvh.string()).exit_code, 0);
   CliRun r = run("stats --json " + bvh.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
@@ -56,8 +56,8 @@ TEST_F(WideCli, StatsReportsTheWideSahCosts) {
 
 TEST_F(WideCli, ForcedIsaRunsAndAMissingOrUnknownOneIsAnError) {
   const fs::path bvh = dir_ / "s.bvh";
-  ASSERT_EQ(run("build 'builtin?triangles=2000' -o " + bvh.string()).exit_code, 0);
-  const std::string trace = "trace " + bvh.string() + " --scene 'builtin?triangles=2000' --rays random --count 500 "
+  ASSERT_EQ(run("build 'builtin?triangles=4000' -o " + bvh.string()).exit_code, 0);
+  const std::string trace = "trace " + bvh.string() + " --scene 'builtin?triangles=4000' --rays random --count 500 "
                             "--check 500 --repeats 1 --json --layout bvh8";
   for (bvhopt::Isa isa : {bvhopt::Isa::sse42, bvhopt::Isa::avx2, bvhopt::Isa::avx512}) {
     const std::string name(bvhopt::isa_name(isa));
@@ -81,19 +81,19 @@ TEST_F(WideCli, ForcedIsaRunsAndAMissingOrUnknownOneIsAnError) {
 
 TEST_F(WideCli, RenderAndDemoTakeTheLayout) {
   const fs::path bvh = dir_ / "s.bvh";
-  ASSERT_EQ(run("build 'builtin?triangles=2000' -o " + bvh.string()).exit_code, 0);
+  ASSERT_EQ(run("build 'builtin?triangles=4000' -o " + bvh.string()).exit_code, 0);
   for (const char* layout : {"bvh2", "bvh8"}) {
-    CliRun r = run("render " + bvh.string() + " --scene 'builtin?triangles=2000' --width 64 --height 48 --json --layout " +
+    CliRun r = run("render " + bvh.string() + " --scene 'builtin?triangles=4000' --width 64 --height 48 --json --layout " +
                    layout + " --heatmap " + (dir_ / (std::string(layout) + ".png")).string());
     ASSERT_EQ(r.exit_code, 0) << r.err;
     const auto j = nlohmann::json::parse(r.out);
     EXPECT_EQ(j["layout"], layout);
     EXPECT_GT(j["mean_steps"].get<double>(), 0.0);
   }
-  CliRun d = run("demo --triangles 2000 --rays 2000 --quick --json --layout bvh4 --images " + (dir_ / "demo").string());
+  CliRun d = run("demo --triangles 4000 --rays 2000 --quick --json --layout bvh4 --images " + (dir_ / "demo").string());
   ASSERT_EQ(d.exit_code, 0) << d.err;
   EXPECT_EQ(nlohmann::json::parse(d.out)["layout"], "bvh4");
-  CliRun bad = run("trace " + bvh.string() + " --scene 'builtin?triangles=2000' --layout bvh16");
+  CliRun bad = run("trace " + bvh.string() + " --scene 'builtin?triangles=4000' --layout bvh16");
   EXPECT_NE(bad.exit_code, 0);
 }
 

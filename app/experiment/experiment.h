@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "bvhopt/any_tracer.h"
+#include "bvhopt/insertion_optimizer.h"
 
 namespace bvhopt {
 
@@ -75,6 +76,14 @@ struct ExperimentConfig {
 
 // Smaller settings for tests and trial runs: 20k rays, 4 frames, t in {10, 14}, a 10 s budget.
 ExperimentConfig quick_experiment_config(ExperimentConfig base);
+
+// The insertion of Bittner et al.'s Table 1 as published: the sequential form, batch
+// k = 1 %, M_AREA, random selection after p_R = 5 and the stop after p_T = 10 passes in
+// which the cost does not fall (any fall counts: no minimum improvement), no pass cap.
+InsertionConfig bittner_paper_insertion_config(uint64_t seed);
+// Our own form, a row of its own: the library's defaults (sequential, then a parallel
+// polish; an improvement must exceed min_improvement; at most max_passes).
+InsertionConfig hybrid_insertion_config(uint64_t seed);
 
 // Runs this shard's part of the grid and writes results.json, the CSVs, the heat maps, the
 // plots and report.md into `out` (created). Throws Error for a bad config or scene.

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <vector>
 
 namespace bvhopt {
 
@@ -26,5 +27,34 @@ void write_atomically(const std::filesystem::path& path,
 
 // Writes `text` to `path` through write_atomically.
 void write_text_atomically(const std::filesystem::path& path, const std::string& text);
+
+// Checks, before any work, that `path` can be written as write_atomically would write it:
+// not a folder, and (for a regular file or a missing path) its folder exists and a file can
+// be created there (a probe file is created and removed). Throws Error naming `what` (the
+// option, e.g. "--heatmap") and the path, so a typo costs nothing instead of the run.
+void check_output_path(const std::filesystem::path& path, const std::string& what);
+
+// The same for an output folder that may not exist yet: the path, if it exists, is a
+// folder, and a file can be created in it or in the nearest folder above it that exists.
+void check_output_folder(const std::filesystem::path& path, const std::string& what);
+
+// Several outputs of one run, written all or none: add() writes each to its temporary at
+// once (a failure removes every temporary so far and throws), commit() then moves them all
+// into place. Destroyed without commit(), it removes the temporaries and leaves every target
+// as it was.
+class OutputGroup {
+ public:
+  OutputGroup();
+  ~OutputGroup();
+  OutputGroup(const OutputGroup&) = delete;
+  OutputGroup& operator=(const OutputGroup&) = delete;
+  void add(const std::filesystem::path& path, const std::function<void(const std::filesystem::path& tmp)>& write);
+  void add_text(const std::filesystem::path& path, const std::string& text);
+  void commit();
+
+ private:
+  struct Staged;
+  std::vector<Staged>* staged_;
+};
 
 }  // namespace bvhopt

@@ -56,13 +56,19 @@ Box geometry_bounds(const Mesh& mesh);
 // One primary ray per pixel centre, row-major from the top-left pixel; directions unit length.
 std::vector<Ray> camera_rays(const Camera& camera);
 
+// The most rays one set may hold (4 GiB of rays), and the most pixels of a camera image.
+inline constexpr uint64_t kMaxRayCount = uint64_t(1) << 27;
+
 struct RaySetConfig {
   RayKind kind = RayKind::primary;
   uint64_t seed = 1;
   // Rays wanted. 0: the camera's width * height for primary rays, 1,000,000 otherwise.
   // primary: the resolution is set to about this many pixels at the camera's aspect ratio.
   // ao, shadow, path: the camera resolution grows until the hits give at least this many
-  // rays, and the set is cut to exactly `count`, in pixel order.
+  // rays, and the set is cut to exactly `count`, in pixel order. The image grows to at most
+  // 64 pixels per ray wanted (at least 1024x1024, at most kMaxRayCount pixels); a camera
+  // whose hits give fewer rays even then is an Error naming the set, the count reached and
+  // why. At most kMaxRayCount (larger is an Error).
   uint64_t count = 0;
   std::optional<Camera> camera;   // default: default_camera(..., width, height)
   uint32_t width = 1024;

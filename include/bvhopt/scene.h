@@ -18,6 +18,10 @@ struct BuiltinSceneConfig {
 };
 Mesh make_builtin_scene(const BuiltinSceneConfig& config = {});
 
+// The fewest triangles the built-in scene has with this seed: its architecture alone (walls,
+// vaults, stairs, slabs), with no furniture. A smaller target cannot be met.
+uint64_t min_builtin_scene_triangles(uint64_t seed);
+
 // Whether `spec` names the built-in scene: "builtin" followed by nothing, ':' or '?'
 // (anything else, say a file called builtin.obj, is a path).
 bool is_builtin_scene_spec(const std::string& spec);

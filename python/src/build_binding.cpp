@@ -8,6 +8,7 @@
 #include "bindings.h"
 #include "bvhopt/build.h"
 #include "bvhopt/edge_volume_subdivision.h"
+#include "bvhopt/bvh_file.h"
 #include "bvhopt/error.h"
 #include "bvhopt/leaf_dedup.h"
 
@@ -55,10 +56,7 @@ Tree build(const Scene& scene, const std::string& builder, uint32_t leaf_size, d
     // Over subdivided references a leaf keeps one reference per triangle (as the command line).
     if (subdivide) dedup_leaf_references(tree.bvh, tree.refs);
   }
-  tree.info.cost = options.cost;
-  tree.info.scene_name = scene.mesh.name;
-  tree.info.scene_triangles = scene.mesh.triangle_count();
-  tree.info.method = subdivide ? "evh+" + builder : builder;
+  tree.info = scene_info(scene.mesh, options.cost, subdivide ? "evh+" + builder : builder);
   return tree;
 }
 

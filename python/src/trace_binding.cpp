@@ -10,6 +10,7 @@
 #include "bindings.h"
 #include "bvhopt/any_tracer.h"
 #include "bvhopt/binned_sah_builder.h"
+#include "bvhopt/bvh_file.h"
 #include "bvhopt/error.h"
 #include "bvhopt/finalize.h"
 #include "bvhopt/ray_measure.h"
@@ -19,10 +20,7 @@
 namespace bvhopt::python {
 
 std::unique_ptr<Tracer> make_tracer(const Tree& tree, const Mesh& mesh, const std::string& where) {
-  if (tree.info.scene_triangles != mesh.triangle_count())
-    throw Error(where + ": the tree was built over scene '" + tree.info.scene_name + "' with " +
-                std::to_string(tree.info.scene_triangles) + " triangles, but scene '" + mesh.name + "' has " +
-                std::to_string(mesh.triangle_count()) + " (pass the scene the tree was built from)");
+  check_tree_matches_scene(where, tree.info, mesh);
   return std::make_unique<Tracer>(finalize(tree.bvh, tree.refs), mesh);
 }
 

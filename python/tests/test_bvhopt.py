@@ -165,7 +165,7 @@ def test_interrupt_keeps_the_best_tree_so_far(scene):
     (lambda s: bvhopt.rays(s, "sideways"), "unknown kind 'sideways'"),
     (lambda s: bvhopt.build(s).trace(s, np.zeros((4, 7), np.float32)), "shape (4, 7)"),
     (lambda s: bvhopt.build(s).trace(s, np.zeros((4, 8), np.float32), layout="bvh16"), "unknown layout 'bvh16'"),
-    (lambda s: bvhopt.build(s).trace(bvhopt.load_scene("builtin?triangles=3000"), np.zeros((1, 8), np.float32)),
+    (lambda s: bvhopt.build(s).trace(bvhopt.load_scene("builtin?triangles=4000"), np.zeros((1, 8), np.float32)),
      "pass the scene the tree was built from"),
     (lambda s: bvhopt.build(s).save("/nonexistent/dir/t.bvh"), "/nonexistent/dir"),
 ])
@@ -175,9 +175,25 @@ def test_errors_raise_with_the_library_message(scene, call, message):
     assert message in str(info.value)
 
 
+def test_trace_refuses_a_scene_of_the_same_size_with_other_geometry(tmp_path):
+    # Built-in seeds 1 and 2 have the same triangle count: only the fingerprint tells.
+    a = bvhopt.load_scene("builtin?triangles=4000&seed=1")
+    b = bvhopt.load_scene("builtin?triangles=4000&seed=2")
+    tree = bvhopt.build(a)
+    rays = bvhopt.rays(a, "random", count=10)
+    tree.trace(a, rays)
+    with pytest.raises(bvhopt.Error) as info:
+        tree.trace(b, rays)
+    assert "fingerprint" in str(info.value)
+    path = tmp_path / "t.bvh"
+    tree.save(str(path))
+    with pytest.raises(bvhopt.Error):
+        bvhopt.load(str(path)).trace(b, rays)
+
+
 def test_example_compare_methods_runs(tmp_path):
     example = runpy.run_path(str(ROOT / "examples" / "python" / "compare_methods.py"))
-    rows = example["main"]("builtin?triangles=3000", str(tmp_path / "methods.png"))
+    rows = example["main"]("builtin?triangles=4000", str(tmp_path / "methods.png"))
     assert [r[0] for r in rows] == ["sweep", "hill-climb", "anneal", "insertion"]
     assert all(cost <= rows[0][1] for _, cost, _ in rows[1:])
     assert (tmp_path / "methods.png").stat().st_size > 1000

@@ -14,9 +14,11 @@
 #include <vector>
 
 #include "bvhopt/error.h"
+#include "bvhopt/geometry_fingerprint.h"
 #include "bvhopt/validate.h"
 #include "bvhopt/atomic_file.h"
 #include "bvhopt/testing/bvh_file_checksum.h"
+#include "io/regular_file.h"
 
 // The layout is described byte for byte in docs/file-format.md; keep the two in step.
 
@@ -31,6 +33,7 @@ constexpr uint64_t kNodeRecord = 32;       // 6 floats + 2 uint32
 constexpr uint64_t kSlotRecord = 4;
 constexpr uint64_t kRefRecord = 28;        // 6 floats + 1 uint32
 constexpr uint64_t kChecksumSize = 8;
+constexpr uint64_t kFingerprintSize = 8;   // version 2: after the method string
 constexpr uint64_t kMaxCount = 0xffffffffu;  // node and reference indices are 32-bit
 constexpr size_t kIoChunk = size_t(1) << 20;
 
@@ -192,13 +195,13 @@ class Writer {
 
 std::vector<unsigned char> encode_header(uint32_t root, uint64_t nodes, uint64_t refs, uint64_t slots,
                                          const BvhFileInfo& info) {
-  const uint64_t header_size = kFixedHeaderSize + info.scene_name.size() + 4 + info.method.size();
+  const uint64_t header_size = kFixedHeaderSize + info.scene_name.size() + 4 + info.method.size() + kFingerprintSize;
   std::vector<unsigned char> h(header_size, 0);
   unsigned char* p = h.data();
   std::memcpy(p, kMagic, 8);
   store<uint32_t>(p + 8, kBvhFileVersion);
   store<uint32_t>(p + 12, static_cast<uint32_t>(header_size));
-  store<uint32_t>(p + 16, 0);  // flags: none defined in version 1
+  store<uint32_t>(p + 16, 0);  // flags: none defined
   store<uint32_t>(p + 20, root);
   store<uint64_t>(p + 24, nodes);
   store<uint64_t>(p + 32, refs);
@@ -212,6 +215,7 @@ std::vector<unsigned char> encode_header(uint32_t root, uint64_t nodes, uint64_t
   unsigned char* q = p + 80 + info.scene_name.size();
   store<uint32_t>(q, static_cast<uint32_t>(info.method.size()));
   std::memcpy(q + 4, info.method.data(), info.method.size());
+  store<uint64_t>(q + 4 + info.method.size(), info.geometry_fingerprint);
   return h;
 }
 
@@ -367,9 +371,18 @@ Header read_header(Reader& in, const std::string& name, uint64_t file_size, BvhF
     throw truncated(strings_end, " at least (header with a method name of " + std::to_string(method_len) + " bytes)");
   info.method.resize(method_len);
   in.read(reinterpret_cast<unsigned char*>(info.method.data()), method_len);
-  if (h.header_size < strings_end)
+  // Version 2 adds the geometry fingerprint after the method string.
+  const uint64_t known_end = strings_end + (version >= 2 ? kFingerprintSize : 0);
+  if (known_end > file_size)
+    throw truncated(known_end, " at least (header with the geometry fingerprint)");
+  if (h.header_size < known_end)
     throw Error(name + ": corrupt header: header size " + std::to_string(h.header_size) +
-                " is smaller than its contents (" + std::to_string(strings_end) + " bytes)");
+                " is smaller than its contents (" + std::to_string(known_end) + " bytes)");
+  if (version >= 2) {
+    unsigned char fp[kFingerprintSize];
+    in.read(fp, kFingerprintSize);
+    info.geometry_fingerprint = load<uint64_t>(fp);
+  }
 
   if (h.node_count > kMaxCount || h.ref_count > kMaxCount || h.slot_count > kMaxCount)
     throw Error(name + ": corrupt header: counts out of range (" + std::to_string(h.node_count) + " nodes, " +
@@ -388,7 +401,7 @@ Header read_header(Reader& in, const std::string& name, uint64_t file_size, BvhF
 
   // Header bytes this version does not know (a later minor addition) are skipped.
   std::vector<unsigned char> chunk(kIoChunk);
-  for (uint64_t left = h.header_size - strings_end; left > 0;) {
+  for (uint64_t left = h.header_size - known_end; left > 0;) {
     size_t take = static_cast<size_t>(std::min<uint64_t>(left, chunk.size()));
     in.read(chunk.data(), take);
     left -= take;
@@ -482,7 +495,7 @@ void check_references(const std::string& name, const Header& h, BvhFile& out) {
                              char b[16];
                              std::snprintf(b, sizeof b, "%x", h.flags);
                              return std::string(b);
-                           }() + " (version 1 defines none)");
+                           }() + " (no flag is defined)");
   if (h.node_count == 0 ? h.root != kInvalidNode : h.root != 0)
     throw Error(name + ": corrupt: root " + std::to_string(h.root) +
                 " (nodes are stored depth-first: the root is node 0" +
@@ -511,10 +524,10 @@ void check_references(const std::string& name, const Header& h, BvhFile& out) {
 
 BvhFile read_bvh_file(const std::filesystem::path& path) {
   const std::string name = path.string();
+  require_regular_file(path, "BVH file");
   FilePtr f(std::fopen(path.c_str(), "rb"));
   if (!f) throw Error(name + ": cannot open: " + sys_error(errno));
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) throw Error(name + ": not a regular file");
   const uint64_t file_size = std::filesystem::file_size(path, ec);
   if (ec) throw Error(name + ": cannot get the file size: " + ec.message());
   std::setvbuf(f.get(), nullptr, _IONBF, 0);  // reads come in 1 MiB chunks
@@ -527,6 +540,45 @@ BvhFile read_bvh_file(const std::filesystem::path& path) {
   ValidationReport report = validate(out.bvh, out.refs, ValidationOptions{.allow_dropped_duplicates = true});
   if (!report.ok()) throw Error(name + ": invalid tree: " + report.summary());
   return out;
+}
+
+}  // namespace bvhopt
+
+namespace bvhopt {
+
+bool has_bvh_file_magic(const std::filesystem::path& path) {
+  FilePtr f(std::fopen(path.c_str(), "rb"));
+  unsigned char head[sizeof kMagic];
+  return f && std::fread(head, 1, sizeof head, f.get()) == sizeof head && std::memcmp(head, kMagic, sizeof head) == 0;
+}
+
+BvhFileInfo scene_info(const Mesh& mesh, const CostModel& cost, const std::string& method) {
+  BvhFileInfo info;
+  info.cost = cost;
+  info.scene_name = mesh.name;
+  info.scene_triangles = mesh.triangle_count();
+  info.method = method;
+  info.geometry_fingerprint = geometry_fingerprint(mesh);
+  return info;
+}
+
+void check_tree_matches_scene(const std::string& file, const BvhFileInfo& info, const Mesh& mesh) {
+  const std::string built = file + ": built over scene '" + info.scene_name + "' (" +
+                            std::to_string(info.scene_triangles) + " triangles), ";
+  const std::string hint = " (pass the scene the tree was built from, with the same --rotate)";
+  if (info.scene_triangles != mesh.triangle_count())
+    throw Error(built + "but scene '" + mesh.name + "' has " + std::to_string(mesh.triangle_count()) + " triangles" + hint);
+  if (info.geometry_fingerprint != 0) {
+    if (info.geometry_fingerprint != geometry_fingerprint(mesh))
+      throw Error(built + "but scene '" + mesh.name +
+                  "' has other geometry: its fingerprint differs (another scene of the same size, another "
+                  "--rotate, or another built-in seed)" + hint);
+    return;
+  }
+  // A version-1 file has no fingerprint: the name is all there is to tell scenes apart.
+  if (info.scene_name != mesh.name)
+    throw Error(built + "but the scene is '" + mesh.name +
+                "' (the file has no geometry fingerprint, so the scene names must match)" + hint);
 }
 
 }  // namespace bvhopt

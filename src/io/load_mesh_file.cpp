@@ -13,8 +13,12 @@
 #include <unordered_map>
 #include <system_error>
 
+#include "bvhopt/bvh_file.h"
 #include "bvhopt/error.h"
 #include "bvhopt/scene_file.h"
+#include "io/gltf_precheck.h"
+#include "io/obj_precheck.h"
+#include "io/regular_file.h"
 #include "io/ply_precheck.h"
 #include "io/scene_camera.h"
 
@@ -69,10 +73,8 @@ void weld_identical_positions(Mesh& mesh) {
 }
 
 void check_file(const std::filesystem::path& path, const std::string& where) {
+  require_regular_file(path, "scene file");
   std::error_code ec;
-  const auto status = std::filesystem::status(path, ec);
-  if (ec || !std::filesystem::exists(status)) throw Error(where + ": no such file");
-  if (std::filesystem::is_directory(status)) throw Error(where + ": is a directory, not a scene file");
   if (std::filesystem::file_size(path, ec) == 0 && !ec) throw Error(where + ": empty file");
 }
 
@@ -176,7 +178,11 @@ Mesh merge_meshes(const aiScene* scene, const std::filesystem::path& path, const
 Mesh load_mesh_file(const std::filesystem::path& path) {
   const std::string where = path.string();
   check_file(path, where);
+  if (has_bvh_file_magic(path))
+    throw Error(where + ": a bvhopt BVH file (a tree), not a scene: pass the scene the tree was built from");
   check_ply(path, where);
+  check_gltf(path, where);
+  check_obj(path, where);
   Assimp::Importer importer;
   // Read first and post-process second, so that a file with no faces gets our "no
   // triangles" rather than an error from a post-processing step about orphaned meshes.

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "bvhopt/error.h"
+#include "io/printable_text.h"
 
 namespace bvhopt {
 namespace {
@@ -36,24 +37,6 @@ struct PlyHeader {
     return n;
   }
 };
-
-// Text from the file as an error message may show it: control and non-ASCII bytes as \xNN,
-// at most 60 characters, so a corrupt file cannot put raw bytes on the terminal.
-std::string printable(std::string_view text) {
-  static const char* const kHex = "0123456789abcdef";
-  std::string out;
-  for (unsigned char c : text.substr(0, 60)) {
-    if (c >= 0x20 && c < 0x7f) {
-      out += static_cast<char>(c);
-    } else {
-      out += "\\x";
-      out += kHex[c >> 4];
-      out += kHex[c & 15];
-    }
-  }
-  if (text.size() > 60) out += "...";
-  return out;
-}
 
 // A count as the header states it: digits only (istream would wrap "-5" to 2^64 - 5).
 bool parse_count(const std::string& word, uint64_t& count) {

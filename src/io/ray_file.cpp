@@ -11,6 +11,7 @@
 #include "bvhopt/atomic_file.h"
 #include "bvhopt/error.h"
 #include "io/fnv1a.h"
+#include "io/regular_file.h"
 
 namespace bvhopt {
 namespace {
@@ -68,6 +69,7 @@ void write_ray_file(const std::filesystem::path& path, const RaySet& set) {
 
 RaySet read_ray_file(const std::filesystem::path& path) {
   const std::string name = path.string();
+  require_regular_file(path, "ray file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(name + ": cannot open ray file (missing or unreadable)");
   in.seekg(0, std::ios::end);

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <atomic>
 #include <cstdint>
 #include <limits>
 #include <string>
@@ -25,6 +26,10 @@ constexpr size_t kGrain = 2048;
 struct Params {
   double eps = 0.0;
   uint32_t max_depth = 0;
+  // A count pass stops a triangle after this many pieces: one triangle alone above the
+  // reference budget already misses it, and counting its 2^max_depth pieces would take
+  // minutes at a large t.
+  uint64_t piece_cap = UINT64_MAX;
 };
 
 // Volume of the box of edge p-q. |p - q| equals |q - p| exactly in IEEE arithmetic, so both
@@ -116,7 +121,7 @@ inline PieceStats subdivide_one(const Vec3& v0, const Vec3& v1, const Vec3& v2, 
     leaf(cur.v[0], cur.v[1], cur.v[2]);
     ++stats.pieces;
     stats.deepest = std::max(stats.deepest, cur.depth);
-    if (top == 0) break;
+    if (top == 0 || stats.pieces > params.piece_cap) break;
     cur = pop(--top);
   }
   return stats;
@@ -189,15 +194,28 @@ struct CountTotals {
 };
 
 // The count pass: pieces per triangle into counts, totals returned. Integer sums and
-// maxima, so the reduction order does not matter.
-CountTotals count_pass(const Mesh& mesh, const Params& params, std::vector<uint32_t>* counts) {
+// maxima, so the reduction order does not matter. The pass gives up once the pieces
+// counted so far exceed `budget` (the totals are then a partial count above it): its cost
+// is bounded by the budget, not by 2^max_depth pieces per triangle.
+CountTotals count_pass(const Mesh& mesh, const Params& params, double budget, std::vector<uint32_t>* counts) {
   const Corners c{mesh.positions.data(), mesh.indices.data()};
   const size_t n = mesh.triangle_count();
   const size_t nv = mesh.vertex_count();
+  std::atomic<uint64_t> counted{0};
+  auto over_budget = [&] { return static_cast<double>(counted.load(std::memory_order_relaxed)) > budget; };
   return tbb::parallel_reduce(
       tbb::blocked_range<size_t>(0, n, kGrain), CountTotals{},
       [&](const tbb::blocked_range<size_t>& r, CountTotals acc) {
+        uint64_t block_pieces = 0;
         for (size_t t = r.begin(); t != r.end(); ++t) {
+          if (block_pieces > 4096) {
+            counted.fetch_add(block_pieces, std::memory_order_relaxed);
+            block_pieces = 0;
+          }
+          if (over_budget()) {
+            acc.references = std::max<uint64_t>(acc.references, counted.load(std::memory_order_relaxed));
+            return acc;
+          }
           // The index check rides on the count pass, which reads the indices anyway.
           if (c.idx[3 * t] >= nv || c.idx[3 * t + 1] >= nv || c.idx[3 * t + 2] >= nv) {
             acc.first_bad = std::min(acc.first_bad, t);
@@ -207,10 +225,12 @@ CountTotals count_pass(const Mesh& mesh, const Params& params, std::vector<uint3
           const PieceStats s = subdivide_one(c.get(t, 0), c.get(t, 1), c.get(t, 2), params, NoLeaf{}, NoSplit{});
           if (counts) (*counts)[t] = s.pieces;
           acc.references += s.pieces;
+          block_pieces += s.pieces;
           acc.subdivided += s.pieces > 1;
           acc.deepest = std::max(acc.deepest, s.deepest);
           acc.depth_limited += s.depth_limited;
         }
+        counted.fetch_add(block_pieces, std::memory_order_relaxed);
         return acc;
       },
       [](CountTotals a, const CountTotals& b) {
@@ -223,8 +243,9 @@ CountTotals count_pass(const Mesh& mesh, const Params& params, std::vector<uint3
       });
 }
 
-Params params_for(double volume, int t, const EdgeVolumeConfig& config) {
-  return Params{std::ldexp(volume, -t), config.max_depth};
+Params params_for(double volume, int t, const EdgeVolumeConfig& config, double budget) {
+  const uint64_t cap = budget >= 0x1p63 ? UINT64_MAX : static_cast<uint64_t>(budget);
+  return Params{std::ldexp(volume, -t), config.max_depth, cap};
 }
 
 // Counts, lowering t until the budget holds. Fills counts (when given) for the t chosen.
@@ -240,8 +261,8 @@ EdgeVolumeStats count_with_budget(const Mesh& mesh, const EdgeVolumeConfig& conf
   if (counts) counts->assign(stats.triangles, 1);
   int t = config.t;
   for (;;) {
-    const Params params = params_for(stats.scene_volume, t, config);
-    const CountTotals totals = count_pass(mesh, params, counts);
+    const Params params = params_for(stats.scene_volume, t, config, budget);
+    const CountTotals totals = count_pass(mesh, params, budget, counts);
     if (totals.first_bad != SIZE_MAX) {
       const std::string name = mesh.name.empty() ? std::string("mesh") : mesh.name;
       const size_t nv = mesh.vertex_count();

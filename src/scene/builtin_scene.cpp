@@ -522,6 +522,12 @@ struct Generator {
 
 }  // namespace
 
+uint64_t min_builtin_scene_triangles(uint64_t seed) {
+  Emitter counter(nullptr);
+  Generator(BuiltinSceneConfig{seed, 1}, counter).run();
+  return counter.triangles();
+}
+
 Mesh make_builtin_scene(const BuiltinSceneConfig& config) {
   Emitter counter(nullptr);
   Generator(config, counter).run();

@@ -67,6 +67,13 @@ BuiltinSceneConfig parse_builtin_scene_spec(const std::string& spec) {
       throw Error(spec + ": unknown option '" + std::string(key) + "' (available: triangles, seed)");
     }
   }
+  if (seen_triangles) {
+    const uint64_t fewest = min_builtin_scene_triangles(config.seed);
+    if (config.target_triangles < fewest)
+      throw Error(spec + ": option 'triangles': " + std::to_string(config.target_triangles) +
+                  " is below the smallest built-in scene, " + std::to_string(fewest) +
+                  " triangles (its walls, vaults and stairs alone)");
+  }
   return config;
 }
 

@@ -54,33 +54,6 @@ Vec3 cosine_direction(const Vec3& n, Rng& rng) {
   return normalize(t * (r * std::cos(phi)) + b * (r * std::sin(phi)) + n * z);
 }
 
-// Rays started at the primary hits of a camera: up to `per_pixel` per pixel, made by
-// `emit(pixel, hit, tri, normal, rng, out)`, gathered in pixel order.
-template <class Emit>
-std::vector<Ray> from_primary_hits(const Mesh& mesh, const Tracer& tracer, const Camera& camera, uint64_t seed,
-                                   uint32_t per_pixel, Emit emit) {
-  const std::vector<Ray> primary = camera_rays(camera);
-  const size_t pixels = primary.size();
-  std::vector<Ray> slots(pixels * per_pixel);
-  std::vector<uint32_t> used(pixels, 0);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, 256), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t p = r.begin(); p < r.end(); ++p) {
-      TraceCounters c;
-      const Hit h = tracer.closest(primary[p], c);
-      if (!h.hit()) continue;
-      const Triangle tri = mesh.triangle(h.triangle_id);
-      Vec3 n;
-      if (!facing_normal(tri, primary[p].dir, n)) continue;
-      Rng rng(seed, p);
-      used[p] = emit(primary[p], h, tri, n, rng, &slots[p * per_pixel]);
-    }
-  });
-  std::vector<Ray> out;
-  for (size_t p = 0; p < pixels; ++p)
-    out.insert(out.end(), slots.begin() + p * per_pixel, slots.begin() + p * per_pixel + used[p]);
-  return out;
-}
-
 Camera with_pixels(Camera cam, double pixels) {
   const double aspect = double(cam.width) / double(std::max<uint32_t>(cam.height, 1));
   const double h = std::max(1.0, std::round(std::sqrt(pixels / aspect)));
@@ -113,7 +86,31 @@ std::vector<RayKind> all_ray_kinds() {
   return {RayKind::primary, RayKind::random, RayKind::ao, RayKind::path, RayKind::shadow};
 }
 
-std::vector<Ray> camera_rays(const Camera& cam) {
+namespace {
+
+// The pinhole camera's ray through pixel (x, y), one pixel at a time, so that a large image
+// need not be held as rays.
+class CameraBasis {
+ public:
+  explicit CameraBasis(const Camera& cam);
+  Ray ray(uint64_t pixel) const {
+    const uint32_t x = static_cast<uint32_t>(pixel % cam_.width), y = static_cast<uint32_t>(pixel / cam_.width);
+    const float sx = (2.0f * (x + 0.5f) / cam_.width - 1.0f) * tan_half_ * aspect_;
+    const float sy = (1.0f - 2.0f * (y + 0.5f) / cam_.height) * tan_half_;
+    Ray r;
+    r.org = cam_.position;
+    r.dir = normalize(forward_ + right_ * sx + up_ * sy);
+    return r;
+  }
+  uint64_t pixels() const { return uint64_t(cam_.width) * cam_.height; }
+
+ private:
+  Camera cam_;
+  Vec3 forward_, right_, up_;
+  float tan_half_ = 0.0f, aspect_ = 1.0f;
+};
+
+CameraBasis::CameraBasis(const Camera& cam) : cam_(cam) {
   const Vec3 forward_raw = cam.target - cam.position;
   if (!(length(forward_raw) > 0.0f) || !is_finite(forward_raw))
     throw Error("camera: position and target must differ and be finite");
@@ -123,22 +120,25 @@ std::vector<Ray> camera_rays(const Camera& cam) {
     // Looking straight along `up`: any perpendicular will do.
     right = cross(forward, std::fabs(forward.x) < 0.9f ? Vec3(1, 0, 0) : Vec3(0, 1, 0));
   }
-  right = normalize(right);
-  const Vec3 up = cross(right, forward);
+  right_ = normalize(right);
+  forward_ = forward;
+  up_ = cross(right_, forward);
   if (cam.width == 0 || cam.height == 0) throw Error("camera: resolution must be at least 1x1");
+  if (uint64_t(cam.width) * cam.height > kMaxRayCount)
+    throw Error("camera: resolution " + std::to_string(cam.width) + "x" + std::to_string(cam.height) + " has more than " +
+                std::to_string(kMaxRayCount) + " pixels (the most rays a set may hold)");
   if (!(cam.fov_degrees > 0.0f && cam.fov_degrees < 180.0f))
     throw Error("camera: field of view " + std::to_string(cam.fov_degrees) + " not in (0, 180) degrees");
-  const float tan_half = std::tan(0.5f * cam.fov_degrees * std::numbers::pi_v<float> / 180.0f);
-  const float aspect = float(cam.width) / float(cam.height);
-  std::vector<Ray> rays(size_t(cam.width) * cam.height);
-  for (uint32_t y = 0; y < cam.height; ++y)
-    for (uint32_t x = 0; x < cam.width; ++x) {
-      const float sx = (2.0f * (x + 0.5f) / cam.width - 1.0f) * tan_half * aspect;
-      const float sy = (1.0f - 2.0f * (y + 0.5f) / cam.height) * tan_half;
-      Ray& r = rays[size_t(y) * cam.width + x];
-      r.org = cam.position;
-      r.dir = normalize(forward + right * sx + up * sy);
-    }
+  tan_half_ = std::tan(0.5f * cam.fov_degrees * std::numbers::pi_v<float> / 180.0f);
+  aspect_ = float(cam.width) / float(cam.height);
+}
+
+}  // namespace
+
+std::vector<Ray> camera_rays(const Camera& cam) {
+  const CameraBasis basis(cam);
+  std::vector<Ray> rays(basis.pixels());
+  for (uint64_t p = 0; p < rays.size(); ++p) rays[p] = basis.ray(p);
   return rays;
 }
 
@@ -176,8 +176,53 @@ std::vector<Ray> random_rays(const Box& box, uint64_t count, uint64_t seed) {
   return rays;
 }
 
+// Rays started at the primary hits of a camera: up to `per_pixel` per pixel, made by
+// `emit(pixel, hit, tri, normal, rng, out)`, in pixel order, until `count` are made or the
+// image ends. Pixels are traced a chunk at a time, so memory stays at `count` rays plus one
+// chunk whatever the resolution; cutting at `count` gives the same rays as tracing all.
+constexpr uint64_t kPixelChunk = uint64_t(1) << 16;
+
+template <class Emit>
+std::vector<Ray> from_primary_hits(const Mesh& mesh, const Tracer& tracer, const Camera& camera, uint64_t seed,
+                                   uint32_t per_pixel, uint64_t count, Emit emit) {
+  const CameraBasis basis(camera);
+  const uint64_t pixels = basis.pixels();
+  std::vector<Ray> out;
+  std::vector<Ray> slots(kPixelChunk * per_pixel);
+  std::vector<uint32_t> used(kPixelChunk);
+  for (uint64_t begin = 0; begin < pixels && out.size() < count; begin += kPixelChunk) {
+    const uint64_t n = std::min(kPixelChunk, pixels - begin);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        used[i] = 0;
+        const Ray primary = basis.ray(begin + i);
+        TraceCounters c;
+        const Hit h = tracer.closest(primary, c);
+        if (!h.hit()) continue;
+        const Triangle tri = mesh.triangle(h.triangle_id);
+        Vec3 normal;
+        if (!facing_normal(tri, primary.dir, normal)) continue;
+        Rng rng(seed, begin + i);
+        used[i] = emit(primary, h, tri, normal, rng, &slots[i * per_pixel]);
+      }
+    });
+    for (size_t i = 0; i < n; ++i) out.insert(out.end(), slots.begin() + i * per_pixel, slots.begin() + i * per_pixel + used[i]);
+  }
+  return out;
+}
+
+// The largest image the secondary sets grow to: `kPixelsPerRay` pixels per ray wanted
+// (a view whose hits give fewer rays than that is all but empty), at least a 1024x1024
+// image, at most kMaxRayCount pixels. It bounds the time and, with the chunks above,
+// keeps memory to the rays wanted whatever the camera sees.
+constexpr double kPixelsPerRay = 64.0;
+double max_secondary_pixels(uint64_t count, uint32_t per_pixel) {
+  return std::min(double(kMaxRayCount), std::max(1024.0 * 1024.0, kPixelsPerRay * double(count) / per_pixel));
+}
+
 // Rays started at the primary hits of the camera: ambient occlusion, shadow or path rays,
-// the image grown until its hits give `count` rays (or a sparse view gives what it can).
+// the image grown until its hits give `count` rays, up to max_secondary_pixels; a view
+// whose hits give fewer even then is an Error saying so.
 std::vector<Ray> secondary_rays(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& config,
                                 const Camera& camera, uint64_t count) {
   const Box box = mesh_bounds(mesh);
@@ -233,27 +278,36 @@ std::vector<Ray> secondary_rays(const Mesh& mesh, const Tracer& tracer, const Ra
   };
 
   // Grow the image until its hits give enough rays; the rays of one pixel stay together.
-  Camera cam = with_pixels(camera, std::max<double>(1.0, double(count) / per_pixel));
+  const double max_pixels = max_secondary_pixels(count, per_pixel);
+  Camera cam = with_pixels(camera, std::min(max_pixels, std::max<double>(1.0, double(count) / per_pixel)));
   std::vector<Ray> rays;
-  for (int attempt = 0;; ++attempt) {
-    rays = from_primary_hits(mesh, tracer, cam, config.seed, per_pixel, emit);
+  for (;;) {
+    rays = from_primary_hits(mesh, tracer, cam, config.seed, per_pixel, count, emit);
     if (rays.size() >= count) break;
-    if (attempt == 6 || rays.empty()) {
-      if (rays.empty())
-        throw Error(mesh.name + ": no " + std::string(ray_kind_name(config.kind)) +
-                    " rays: the camera sees no geometry (set a camera position and target)");
-      break;  // a sparse view: take what there is
+    const double pixels = double(cam.width) * cam.height;
+    const double grow = rays.empty() ? 16.0 : std::min(16.0, 1.1 * double(count) / double(rays.size()));
+    const Camera next = with_pixels(cam, std::min(max_pixels, pixels * std::max(grow, 1.1)));
+    // At the limit, or unable to grow (rounding, or an extreme aspect ratio at its widest).
+    if (double(next.width) * next.height <= pixels) {
+      const std::string kind(ray_kind_name(config.kind));
+      throw Error(mesh.name + ": " + kind + " rays: " + std::to_string(rays.size()) + " of the " +
+                  std::to_string(count) + " wanted: the camera's hits at " + std::to_string(cam.width) + "x" +
+                  std::to_string(cam.height) + " pixels (the limit for this count) give no more, as it sees geometry " +
+                  "in too few pixels; aim the camera at the scene (--camera-position, --camera-target) or ask for fewer " +
+                  "rays (--count)");
     }
-    const double grow = std::min(16.0, 1.1 * double(count) / double(rays.size()));
-    cam = with_pixels(cam, double(cam.width) * cam.height * grow);
+    cam = next;
   }
-  if (rays.size() > count) rays.resize(count);
+  rays.resize(count);
   return rays;
 }
 
 }  // namespace
 
 RaySet make_ray_set(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& config) {
+  if (config.count > kMaxRayCount)
+    throw Error(std::string(ray_kind_name(config.kind)) + " rays: count " + std::to_string(config.count) +
+                " is above the limit of " + std::to_string(kMaxRayCount) + " rays in one set");
   RaySet set;
   set.kind = config.kind;
   set.seed = config.seed;
