@@ -118,7 +118,9 @@ Options parse(int argc, char** argv) {
       o.builders.clear();
       for (auto& b : split_list(args.value())) {
         auto k = parse_builder(b);
-        if (!k) throw Error("build_bench: unknown builder '" + b + "' (sweep, binned, spatial-median, object-median)");
+        if (!k || *k == BuilderKind::spatial_split)
+          throw Error("build_bench: unknown builder '" + b +
+                      "' (sweep, binned, spatial-median, object-median; sbvh has its own bench: sbvh_bench)");
         o.builders.push_back(*k);
       }
     } else if (a == "--help" || a == "-h") {

@@ -16,7 +16,7 @@
 #include "bvhopt/error.h"
 #include "bvhopt/insertion_optimizer.h"
 #include "bvhopt/references.h"
-#include "bvhopt/sweep_sah_builder.h"
+#include "bvhopt/triangle_cost.h"
 #include "cli_common.h"
 #include "commands.h"
 #include "optimize_progress.h"
@@ -26,6 +26,7 @@ namespace {
 
 struct BakeOptions {
   SceneOption scene;
+  SceneBuilderOption builder;  // name empty: the quality's builder
   ThreadsOption threads;
   CostOption cost;
   std::string quality = "balanced";
@@ -40,6 +41,11 @@ double budget_in_build_times(const std::string& quality) {
   if (quality == "balanced") return 5.0;
   return 0.0;  // best
 }
+
+// The builder of each quality when --builder is not given: spatial splits for best, where
+// their lower cost is worth their build time and 1.3x references (the table in
+// docs/spatial-splits.md), sweep SAH otherwise.
+std::string builder_for(const std::string& quality) { return quality == "best" ? "sbvh" : "sweep"; }
 
 // Peak resident memory of the process so far (Linux reports kilobytes).
 uint64_t peak_rss_bytes() {
@@ -56,6 +62,8 @@ struct BakeResult {
   OptimizeReport report;
   uint64_t leaves = 0;
   uint64_t peak_rss = 0;
+  std::string builder;
+  uint64_t references = 0;  // made by the builder (before the collapse keeps one per triangle in a leaf)
 };
 
 BakeResult bake(const BakeOptions& opt) {
@@ -70,11 +78,13 @@ BakeResult bake(const BakeOptions& opt) {
   progress.update("building " + std::to_string(r.triangles) + " triangles", true);
   const CostModel cost = opt.cost.model();
   Stopwatch build_clock;
-  PrimitiveRefs refs = make_references(mesh);
-  SweepSahConfig sweep;
-  sweep.cost = cost;
-  sweep.leaf.max_leaf_size = 1;
-  Bvh bvh = build_sweep_sah(refs, sweep);
+  SceneBuilderOption builder = opt.builder;
+  if (builder.name.empty()) builder.name = builder_for(opt.quality);
+  r.builder = builder.name;
+  BuiltTree built = builder.build(mesh, make_references(mesh), cost);
+  Bvh& bvh = built.bvh;
+  const PrimitiveRefs& refs = built.refs;
+  r.references = refs.size();
   r.build_seconds = build_clock.seconds();
   r.cost_built = sah_cost(bvh, cost);
 
@@ -96,7 +106,8 @@ BakeResult bake(const BakeOptions& opt) {
   Stopwatch collapse_clock;
   CollapseConfig collapse;
   collapse.cost = cost;
-  const CollapseResult c = collapse_leaves(bvh, collapse);
+  // With split references a leaf keeps each triangle once and the cost counts triangles.
+  const CollapseResult c = collapse_leaves(bvh, refs, collapse);
   r.collapse_seconds = collapse_clock.seconds();
   r.cost_final = c.cost_after;
   r.leaves = c.leaves_after;
@@ -107,7 +118,7 @@ BakeResult bake(const BakeOptions& opt) {
   info.cost = cost;
   info.scene_name = mesh.name;
   info.scene_triangles = r.triangles;
-  info.method = "sweep+insertion+collapse";
+  info.method = r.builder + "+insertion+collapse";
   progress.update("writing " + opt.output, true);
   write_bvh_file(opt.output, bvh, refs, info);
   progress.finish();
@@ -119,6 +130,8 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
   print_json({{"scene", opt.scene.spec},
               {"triangles", r.triangles},
               {"quality", opt.quality},
+              {"builder", r.builder},
+              {"references", r.references},
               {"threads", opt.threads.effective()},
               {"load_seconds", r.load_seconds},
               {"build_seconds", r.build_seconds},
@@ -139,7 +152,7 @@ void print_bake_summary(const BakeOptions& opt, const BakeResult& r) {
   const double mib = 1024.0 * 1024.0;
   std::cout << "scene      " << opt.scene.spec << " (" << r.triangles << " triangles, loaded in "
             << format_double(r.load_seconds, 2) << " s)\n"
-            << "build      sweep SAH, cost " << format_double(r.cost_built, 4) << ", "
+            << "build      " << r.builder << " (" << r.references << " references), cost " << format_double(r.cost_built, 4) << ", "
             << format_double(r.build_seconds, 2) << " s\n"
             << "optimize   insertion, cost " << format_double(r.cost_optimized, 4) << ", "
             << format_double(r.optimize_seconds, 2) << " s, " << r.report.passes << " passes ("
@@ -165,6 +178,10 @@ void register_bake_command(CLI::App& app) {
                   "fast: optimize for 1x the build time | balanced: 5x | best: until the optimizer converges")
       ->check(CLI::IsMember({"fast", "balanced", "best"}))
       ->capture_default_str();
+  opt->builder.name.clear();
+  opt->builder.add_to(cmd);
+  cmd->get_option("--builder")->description(cmd->get_option("--builder")->get_description() +
+                                            ". Default: sbvh for --quality best, sweep otherwise");
   cmd->add_option("--time-budget", opt->time_budget,
                   "The optimizer's budget instead of the quality's, in seconds or as a multiple of the build time: 3x")
       ->type_name("S|Nx");
