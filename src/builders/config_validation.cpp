@@ -49,6 +49,7 @@ void validate(const SpatialSplitConfig& config) {
   check_cost("alpha", config.alpha);
   check_range("spatial_bins", config.spatial_bins, kMinBinCount, kMaxBinCount);
   check_range("object_bins", config.object_bins, kMinBinCount, kMaxBinCount);
+  check_range("exact_sweep_below", config.exact_sweep_below, 0, 65536);
 }
 
 }  // namespace bvhopt

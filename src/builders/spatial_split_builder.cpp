@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "builders/sah_common.h"
+#include "builders/sorted_range_sweep.h"
 #include "bvhopt/error.h"
 #include "bvhopt/triangle_clipping.h"
 
@@ -45,14 +46,38 @@ struct Task {
 
 float overlap_area(const Box& a, const Box& b) { return intersect(a, b).area(); }
 
+// A bin's box without a constructor, so that a node's bins cost only the n it uses (the
+// arrays hold room for kMaxBins; small nodes use a few).
+struct BinBox {
+  Vec3 min, max;
+  void clear() {
+    min = Vec3(std::numeric_limits<float>::infinity());
+    max = Vec3(-std::numeric_limits<float>::infinity());
+  }
+  void extend(const Box& b) {
+    min = bvhopt::min(min, b.min);
+    max = bvhopt::max(max, b.max);
+  }
+  void extend(const BinBox& b) {
+    min = bvhopt::min(min, b.min);
+    max = bvhopt::max(max, b.max);
+  }
+  Box box() const { return Box(min, max); }
+};
+
 // ---- Object split: centres binned per axis over the node's centre bounds.
 
 struct ObjectBins {
   uint32_t n;
-  Box box[3][kMaxBins];
+  BinBox box[3][kMaxBins];
   uint32_t count[3][kMaxBins];
-  explicit ObjectBins(uint32_t bins) : n(bins) {
-    for (int a = 0; a < 3; ++a) std::fill(count[a], count[a] + n, 0u);
+  explicit ObjectBins(uint32_t bins) { reset(bins); }
+  void reset(uint32_t bins) {
+    n = bins;
+    for (int a = 0; a < 3; ++a) {
+      std::fill(count[a], count[a] + n, 0u);
+      for (uint32_t b = 0; b < n; ++b) box[a][b].clear();
+    }
   }
   void merge(const ObjectBins& o) {
     for (int a = 0; a < 3; ++a)
@@ -86,12 +111,15 @@ struct ObjectMapping {
 
 struct SpatialBins {
   uint32_t n;
-  Box box[3][kMaxBins];
+  BinBox box[3][kMaxBins];
   uint32_t enter[3][kMaxBins], exit[3][kMaxBins];
-  explicit SpatialBins(uint32_t bins) : n(bins) {
+  explicit SpatialBins(uint32_t bins) { reset(bins); }
+  void reset(uint32_t bins) {
+    n = bins;
     for (int a = 0; a < 3; ++a) {
       std::fill(enter[a], enter[a] + n, 0u);
       std::fill(exit[a], exit[a] + n, 0u);
+      for (uint32_t b = 0; b < n; ++b) box[a][b].clear();
     }
   }
   void merge(const SpatialBins& o) {
@@ -141,12 +169,13 @@ struct SpatialMapping {
 };
 
 struct Split {
-  enum Kind { none, object, spatial, halve } kind = none;
+  enum Kind { none, object, spatial, halve, sweep } kind = none;
   int axis = -1;
   uint32_t bin = 0;  // first bin of the right side
   float cost = std::numeric_limits<float>::infinity();
   Box left, right;   // the bins' estimate of the children's boxes
   uint32_t left_count = 0, right_count = 0;
+  std::vector<uint8_t> left_flag;  // sweep: per position in the node, 1 if it goes left
 };
 
 // Per side, what a partition pass found.
@@ -250,13 +279,14 @@ class SpatialSplitBuilder {
   // Runs body(begin, end) over the node's references, merging the results in a fixed
   // order of fixed blocks (min, max and integer sums merge exactly anyway).
   template <class Acc, class Body>
-  Acc reduce(const Task& t, Acc init, const Body& body) const {
+  void reduce(const Task& t, Acc& acc, const Body& body) const {
     if (!parallel(t.count)) {
-      body(init, t.begin, t.begin + t.count);
-      return init;
+      body(acc, t.begin, t.begin + t.count);
+      return;
     }
-    return tbb::parallel_reduce(
-        tbb::blocked_range<size_t>(t.begin, t.begin + t.count, kBlock), init,
+    const Acc identity = acc;  // a local: tasks run here meanwhile may reuse `acc`'s storage
+    acc = tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(t.begin, t.begin + t.count, kBlock), identity,
         [&](const tbb::blocked_range<size_t>& r, Acc acc) {
           body(acc, r.begin(), r.end());
           return acc;
@@ -267,10 +297,64 @@ class SpatialSplitBuilder {
         });
   }
 
+  // Small nodes: the exact sweep over the references sorted by centre on each axis (ties by
+  // position in the node, so the order is unique), as the sweep builder does.
+  Split find_sweep_split(const Task& t) const {
+    thread_local std::vector<uint32_t> order;
+    thread_local std::vector<float> key, suffix;
+    const size_t n = t.count;
+    order.resize(n);
+    key.resize(n);
+    suffix.resize(n);
+    const SRef* s = slots_.get() + t.begin;
+    auto sort_axis = [&](int a) {
+      for (size_t i = 0; i < n; ++i) {
+        order[i] = static_cast<uint32_t>(i);
+        key[i] = s[i].box.min[a] + s[i].box.max[a];
+      }
+      std::sort(order.begin(), order.end(),
+                [&](uint32_t x, uint32_t y) { return key[x] < key[y] || (key[x] == key[y] && x < y); });
+    };
+    detail::SweepCandidate best;
+    int best_axis = -1;
+    for (int a = 0; a < 3; ++a) {
+      sort_axis(a);
+      const detail::SweepCandidate c = detail::sweep_sorted_range(
+          n, [&](Box& b, size_t k) { b.extend(s[order[k]].box); }, [&](size_t k) -> float& { return suffix[k]; });
+      if (best_axis < 0 || detail::better_candidate(c, best)) best = c, best_axis = a;
+    }
+    Split split;
+    split.kind = Split::sweep;
+    split.axis = best_axis;
+    split.cost = best.cost;
+    split.left_count = static_cast<uint32_t>(best.left_count);
+    split.right_count = static_cast<uint32_t>(n - best.left_count);
+    sort_axis(best_axis);
+    split.left_flag.assign(n, 0);
+    for (size_t k = 0; k < n; ++k) {
+      const Box& b = s[order[k]].box;
+      if (k < best.left_count) {
+        split.left_flag[order[k]] = 1;
+        split.left.extend(b);
+      } else {
+        split.right.extend(b);
+      }
+    }
+    return split;
+  }
+
   Split find_object_split(const Task& t) const {
+    if (t.count <= config_.exact_sweep_below) return find_sweep_split(t);
     const uint32_t nb = object_bin_count(t.count);
     const ObjectMapping m(t.state.centres, nb);
-    const ObjectBins bins = reduce(t, ObjectBins(nb), [&](ObjectBins& acc, size_t b, size_t e) {
+    // 13 KB kept per thread rather than cleared whole at every node. A task oneTBB runs on
+    // this thread while it waits in reduce() may use them too, but reduce() assigns the
+    // result only after, and nothing here waits between that and the sweep.
+    thread_local std::unique_ptr<ObjectBins> storage;
+    if (!storage) storage.reset(new ObjectBins(nb));
+    ObjectBins& bins = *storage;
+    bins.reset(nb);
+    reduce(t, bins, [&](ObjectBins& acc, size_t b, size_t e) {
       for (size_t i = b; i < e; ++i) {
         const Box& box = slots_[i].box;
         for (int a = 0; a < 3; ++a) {
@@ -282,7 +366,7 @@ class SpatialSplitBuilder {
     });
     Split best;
     best.kind = Split::object;
-    sweep_bins(nb, best, [&](int a, uint32_t k) -> const Box& { return bins.box[a][k]; },
+    sweep_bins(nb, best, [&](int a, uint32_t k) { return bins.box[a][k].box(); },
                [&](int a, uint32_t k) { return bins.count[a][k]; }, [&](int a, uint32_t k) { return bins.count[a][k]; },
                std::numeric_limits<size_t>::max());
     return best;
@@ -338,16 +422,17 @@ class SpatialSplitBuilder {
   // to its bin. The reference enters at its first non-empty piece and leaves at its last.
   void bin_crossing(SpatialBins& bins, const SpatialMapping& m, int a, const SRef& r, uint32_t enter,
                     uint32_t exit) const {
-    ClipPolygon rest(triangle(r.tri)), piece, above;
+    ClipPolygon poly[2] = {ClipPolygon(triangle(r.tri)), ClipPolygon()}, piece;
+    int rest = 0;
     uint32_t first = kMaxBins, last = 0;
     for (uint32_t k = enter; k <= exit; ++k) {
       Box b;
       if (k < exit) {
-        split_polygon(rest, a, m.plane(a, k + 1), piece, above);
+        split_polygon(poly[rest], a, m.plane(a, k + 1), piece, poly[1 - rest]);
         b = intersect(piece.bounds(), r.box);
-        rest = above;
+        rest = 1 - rest;
       } else {
-        b = intersect(rest.bounds(), r.box);
+        b = intersect(poly[rest].bounds(), r.box);
       }
       if (b.is_empty()) continue;
       bins.box[a][k].extend(b);
@@ -365,7 +450,11 @@ class SpatialSplitBuilder {
   Split find_spatial_split(const Task& t) const {
     const uint32_t nb = config_.spatial_bins;
     const SpatialMapping m(t.state.box, nb);
-    const SpatialBins bins = reduce(t, SpatialBins(nb), [&](SpatialBins& acc, size_t b, size_t e) {
+    thread_local std::unique_ptr<SpatialBins> storage;  // as find_object_split's
+    if (!storage) storage.reset(new SpatialBins(nb));
+    SpatialBins& bins = *storage;
+    bins.reset(nb);
+    reduce(t, bins, [&](SpatialBins& acc, size_t b, size_t e) {
       for (size_t i = b; i < e; ++i) {
         const SRef& r = slots_[i];
         for (int a = 0; a < 3; ++a) {
@@ -384,7 +473,7 @@ class SpatialSplitBuilder {
     });
     Split best;
     best.kind = Split::spatial;
-    sweep_bins(nb, best, [&](int a, uint32_t k) -> const Box& { return bins.box[a][k]; },
+    sweep_bins(nb, best, [&](int a, uint32_t k) { return bins.box[a][k].box(); },
                [&](int a, uint32_t k) { return bins.enter[a][k]; }, [&](int a, uint32_t k) { return bins.exit[a][k]; },
                t.capacity, &m);
     return best;
@@ -431,6 +520,9 @@ class SpatialSplitBuilder {
       case Split::object:
         left = right = ref;
         return om->bin(ref.box, s.axis) < s.bin ? 1 : 2;
+      case Split::sweep:
+        left = right = ref;
+        return s.left_flag[index] ? 1 : 2;
       default:
         break;
     }
