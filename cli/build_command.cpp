@@ -8,6 +8,7 @@
 #include "bvhopt/error.h"
 #include "bvhopt/leaf_dedup.h"
 #include "bvhopt/stats.h"
+#include "bvhopt/triangle_cost.h"
 #include "cli_common.h"
 #include "commands.h"
 
@@ -91,7 +92,7 @@ void run_build(const BuildCommandOptions& opt) {
   write_bvh_file(opt.output, bvh, refs, info);
   progress.finish();
 
-  print_build_summary(opt, mesh, refs, compute_stats(bvh, options.cost), load_s, build_s, evh_report);
+  print_build_summary(opt, mesh, refs, compute_stats(bvh, refs, options.cost), load_s, build_s, evh_report);
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include "bvhopt/cost.h"
 #include "bvhopt/cost_model.h"
 #include "bvhopt/references.h"
+#include "bvhopt/stats.h"
 
 namespace bvhopt {
 
@@ -27,5 +28,9 @@ double sah_cost(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& mode
 // subtree costs once it keeps one reference per triangle (collapse_leaves with references).
 double optimal_collapse_cost(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& model = {},
                              uint32_t max_leaf_size = 0);
+
+// compute_stats with cost and ocost counting triangles as above; every other field is
+// compute_stats's (`references` stays the number of leaf slots).
+TreeStats compute_stats(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& model = {});
 
 }  // namespace bvhopt

@@ -78,4 +78,12 @@ double optimal_collapse_cost(const Bvh& bvh, const PrimitiveRefs& refs, const Co
   return collapse_costs(bvh, model, max_leaf_size, subtree_triangle_counts(bvh, refs)).best[bvh.root] / root_area;
 }
 
+TreeStats compute_stats(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& model) {
+  TreeStats s = compute_stats(bvh, model);
+  if (bvh.empty()) return s;
+  s.cost = sah_cost(bvh, refs, model);
+  s.ocost = optimal_collapse_cost(bvh, refs, model);
+  return s;
+}
+
 }  // namespace bvhopt
