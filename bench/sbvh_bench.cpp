@@ -21,6 +21,8 @@
 // median of 3 passes, process CPU time over the thread count).
 #ifdef BVHOPT_HAVE_EMBREE
 #include <embree3/rtcore.h>
+
+#include "embree_build.h"
 #endif
 
 #include <algorithm>
@@ -139,48 +141,10 @@ struct Tree {
 #ifdef BVHOPT_HAVE_EMBREE
 // ---- Embree HIGH through rtcBuildBVH, with spatial splits.
 
-struct EmbreeNode {
-  bool leaf;
-  uint32_t tri;  // leaf: the triangle
-  Box box;       // leaf: the piece's box
-  EmbreeNode* children[2];
-};
-
 struct EmbreeUser {
   const Mesh* mesh;
 };
 
-void* embree_create_node(RTCThreadLocalAllocator alloc, unsigned int, void*) {
-  auto* n = static_cast<EmbreeNode*>(rtcThreadLocalAlloc(alloc, sizeof(EmbreeNode), 16));
-  n->leaf = false;
-  n->children[0] = n->children[1] = nullptr;
-  return n;
-}
-void embree_set_children(void* node, void** children, unsigned int count, void*) {
-  auto* n = static_cast<EmbreeNode*>(node);
-  for (unsigned i = 0; i < count && i < 2; ++i) n->children[i] = static_cast<EmbreeNode*>(children[i]);
-}
-void embree_set_bounds(void*, const RTCBounds**, unsigned int, void*) {}
-void* embree_create_leaf(RTCThreadLocalAllocator alloc, const RTCBuildPrimitive* prims, size_t count, void*) {
-  EmbreeNode* node = nullptr;
-  for (size_t i = 0; i < count; ++i) {
-    auto* leaf = static_cast<EmbreeNode*>(rtcThreadLocalAlloc(alloc, sizeof(EmbreeNode), 16));
-    leaf->leaf = true;
-    leaf->tri = prims[i].primID;
-    leaf->box = Box(Vec3(prims[i].lower_x, prims[i].lower_y, prims[i].lower_z),
-                    Vec3(prims[i].upper_x, prims[i].upper_y, prims[i].upper_z));
-    if (!node) {
-      node = leaf;
-    } else {
-      auto* inner = static_cast<EmbreeNode*>(rtcThreadLocalAlloc(alloc, sizeof(EmbreeNode), 16));
-      inner->leaf = false;
-      inner->children[0] = node;
-      inner->children[1] = leaf;
-      node = inner;
-    }
-  }
-  return node;
-}
 // The same exact clipping as ours: the triangle cut at the plane, each side's bounds within
 // the piece's box.
 void embree_split(const RTCBuildPrimitive* prim, unsigned int dim, float pos, RTCBounds* left, RTCBounds* right,
@@ -207,7 +171,7 @@ Tree convert_embree(const EmbreeNode* root) {
       const uint32_t r = static_cast<uint32_t>(t.refs.size());
       t.refs.boxes.push_back(e->box);
       t.refs.centroids.push_back(e->box.center());
-      t.refs.triangle_ids.push_back(e->tri);
+      t.refs.triangle_ids.push_back(e->prim);
       t.bvh.nodes[me].make_leaf(static_cast<uint32_t>(t.bvh.ref_indices.size()), 1);
       t.bvh.ref_indices.push_back(r);
       return me;
@@ -243,10 +207,7 @@ Timing embree_high(RTCDevice device, const Mesh& mesh, const PrimitiveRefs& refs
   args.primitives = prims.data();
   args.primitiveCount = refs.size();
   args.primitiveArrayCapacity = capacity;
-  args.createNode = embree_create_node;
-  args.setNodeChildren = embree_set_children;
-  args.setNodeBounds = embree_set_bounds;
-  args.createLeaf = embree_create_leaf;
+  set_embree_callbacks(args);
   args.splitPrimitive = embree_split;
   args.userPtr = &user;
   EmbreeNode* root = nullptr;

@@ -1,5 +1,6 @@
-// bvhopt bake: the one command from a scene to a finished tree. Builds with sweep SAH (one
-// reference per leaf, what the optimizer does best with), optimizes with insertion under a
+// bvhopt bake: the one command from a scene to a finished tree. Builds with sweep SAH, or
+// spatial splits for --quality best (one reference per leaf, what the optimizer does best
+// with; --builder overrides), optimizes with insertion under a
 // time budget, collapses subtrees into leaves where cheaper, and writes the file, with the
 // cost, the time and the peak memory of every step.
 //
