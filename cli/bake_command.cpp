@@ -4,8 +4,9 @@
 // time budget, collapses subtrees into leaves where cheaper, and writes the file, with the
 // cost, the time and the peak memory of every step.
 //
-// The quality levels differ only in the optimizer's default budget, as a multiple of the
-// build time: the insertion optimizer makes most of its gain early (docs in README).
+// The quality levels differ in the optimizer's default budget, as a multiple of the
+// build time (the insertion optimizer makes most of its gain early, docs in README), and
+// best in its builder (docs/spatial-splits.md).
 #include <sys/resource.h>
 
 #include <iostream>
