@@ -6,6 +6,8 @@
 
 #include <embree3/rtcore.h>
 
+#include <cstdint>
+
 #include "bvhopt/box.h"
 
 namespace bvhopt::bench {
