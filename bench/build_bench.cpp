@@ -33,6 +33,8 @@
 
 #ifdef BVHOPT_HAVE_EMBREE
 #include <embree3/rtcore.h>
+
+#include "embree_build.h"
 #endif
 
 // ---- heap accounting: live bytes and their peak, for the memory figures ----
@@ -118,7 +120,9 @@ Options parse(int argc, char** argv) {
       o.builders.clear();
       for (auto& b : split_list(args.value())) {
         auto k = parse_builder(b);
-        if (!k) throw Error("build_bench: unknown builder '" + b + "' (sweep, binned, spatial-median, object-median)");
+        if (!k || *k == BuilderKind::spatial_split)
+          throw Error("build_bench: unknown builder '" + b +
+                      "' (sweep, binned, spatial-median, object-median; sbvh has its own bench: sbvh_bench)");
         o.builders.push_back(*k);
       }
     } else if (a == "--help" || a == "-h") {
@@ -180,46 +184,6 @@ void run_rounds(std::vector<Contestant>& cs, int runs, const std::string& scene,
 }
 
 #ifdef BVHOPT_HAVE_EMBREE
-// The peer's tree in the simplest form the callbacks allow; converted to our Bvh after.
-struct EmbreeNode {
-  bool leaf;
-  uint32_t prim;  // leaf: primitive id
-  EmbreeNode* children[2];
-};
-
-void* embree_create_node(RTCThreadLocalAllocator alloc, unsigned int child_count, void*) {
-  auto* n = static_cast<EmbreeNode*>(rtcThreadLocalAlloc(alloc, sizeof(EmbreeNode), 16));
-  n->leaf = false;
-  n->children[0] = n->children[1] = nullptr;
-  return n;
-}
-void embree_set_children(void* node, void** children, unsigned int count, void*) {
-  auto* n = static_cast<EmbreeNode*>(node);
-  for (unsigned i = 0; i < count && i < 2; ++i) n->children[i] = static_cast<EmbreeNode*>(children[i]);
-}
-void embree_set_bounds(void*, const RTCBounds**, unsigned int, void*) {
-  // Our conversion recomputes every box from the references, so Embree's are not kept.
-}
-void* embree_create_leaf(RTCThreadLocalAllocator alloc, const RTCBuildPrimitive* prims, size_t count, void*) {
-  // maxLeafSize 1 gives one primitive per leaf; a larger leaf becomes a chain of inner nodes.
-  EmbreeNode* node = nullptr;
-  for (size_t i = 0; i < count; ++i) {
-    auto* leaf = static_cast<EmbreeNode*>(rtcThreadLocalAlloc(alloc, sizeof(EmbreeNode), 16));
-    leaf->leaf = true;
-    leaf->prim = prims[i].primID;
-    if (!node) {
-      node = leaf;
-    } else {
-      auto* inner = static_cast<EmbreeNode*>(rtcThreadLocalAlloc(alloc, sizeof(EmbreeNode), 16));
-      inner->leaf = false;
-      inner->children[0] = node;
-      inner->children[1] = leaf;
-      node = inner;
-    }
-  }
-  return node;
-}
-
 std::string g_embree_message = "no message";
 void embree_error(void*, RTCError code, const char* message) {
   g_embree_message = "error " + std::to_string(int(code)) + " (" + (message ? message : "") + ")";
@@ -268,10 +232,7 @@ Timing embree_build_once(RTCDevice device, const PrimitiveRefs& refs, std::vecto
   args.primitives = prims.data();
   args.primitiveCount = prims.size();
   args.primitiveArrayCapacity = prims.size();
-  args.createNode = embree_create_node;
-  args.setNodeChildren = embree_set_children;
-  args.setNodeBounds = embree_set_bounds;
-  args.createLeaf = embree_create_leaf;
+  set_embree_callbacks(args);
   EmbreeNode* root = nullptr;
   const Timing t = time_ms([&] { root = static_cast<EmbreeNode*>(rtcBuildBVH(&args)); });
   if (!root) {

@@ -1,10 +1,12 @@
-// bvhopt bake: the one command from a scene to a finished tree. Builds with sweep SAH (one
-// reference per leaf, what the optimizer does best with), optimizes with insertion under a
+// bvhopt bake: the one command from a scene to a finished tree. Builds with sweep SAH, or
+// spatial splits for --quality best (one reference per leaf, what the optimizer does best
+// with; --builder overrides), optimizes with insertion under a
 // time budget, collapses subtrees into leaves where cheaper, and writes the file, with the
 // cost, the time and the peak memory of every step.
 //
-// The quality levels differ only in the optimizer's default budget, as a multiple of the
-// build time: the insertion optimizer makes most of its gain early (docs in README).
+// The quality levels differ in the optimizer's default budget, as a multiple of the
+// build time (the insertion optimizer makes most of its gain early, docs in README), and
+// best in its builder (docs/spatial-splits.md).
 #include <sys/resource.h>
 
 #include <iostream>
@@ -18,6 +20,7 @@
 #include "bvhopt/references.h"
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/atomic_file.h"
+#include "bvhopt/triangle_cost.h"
 #include "cli_common.h"
 #include "commands.h"
 #include "optimize_progress.h"
@@ -27,6 +30,7 @@ namespace {
 
 struct BakeOptions {
   SceneOption scene;
+  SceneBuilderOption builder;  // name empty: the quality's builder
   ThreadsOption threads;
   CostOption cost;
   std::string quality = "balanced";
@@ -41,6 +45,11 @@ double budget_in_build_times(const std::string& quality) {
   if (quality == "balanced") return 5.0;
   return 0.0;  // best
 }
+
+// The builder of each quality when --builder is not given: spatial splits for best, where
+// their lower cost is worth their build time and 1.3x references (the table in
+// docs/spatial-splits.md), sweep SAH otherwise.
+std::string builder_for(const std::string& quality) { return quality == "best" ? "sbvh" : "sweep"; }
 
 // Peak resident memory of the process so far (Linux reports kilobytes).
 uint64_t peak_rss_bytes() {
@@ -57,6 +66,8 @@ struct BakeResult {
   OptimizeReport report;
   uint64_t leaves = 0;
   uint64_t peak_rss = 0;
+  std::string builder;
+  uint64_t references = 0;  // made by the builder (before the collapse keeps one per triangle in a leaf)
 };
 
 BakeResult bake(const BakeOptions& opt) {
@@ -71,11 +82,13 @@ BakeResult bake(const BakeOptions& opt) {
   progress.update("building " + std::to_string(r.triangles) + " triangles", true);
   const CostModel cost = opt.cost.model();
   Stopwatch build_clock;
-  PrimitiveRefs refs = make_references(mesh);
-  SweepSahConfig sweep;
-  sweep.cost = cost;
-  sweep.leaf.max_leaf_size = 1;
-  Bvh bvh = build_sweep_sah(refs, sweep);
+  SceneBuilderOption builder = opt.builder;
+  if (builder.name.empty()) builder.name = builder_for(opt.quality);
+  r.builder = builder.name;
+  BuiltTree built = builder.build(mesh, make_references(mesh), cost);
+  Bvh& bvh = built.bvh;
+  PrimitiveRefs& refs = built.refs;
+  r.references = refs.size();
   r.build_seconds = build_clock.seconds();
   r.cost_built = sah_cost(bvh, cost);
 
@@ -89,10 +102,13 @@ BakeResult bake(const BakeOptions& opt) {
     gain.add(p.best_cost);
     progress.update("optimizing: " + progress_text(p, gain, false));
   };
-  // The optimizer needs only the tree: the references (40 bytes a triangle) are dropped while
-  // it runs and made again, the same, for the file.
-  refs = PrimitiveRefs{};
+  // The optimizer needs only the tree: one reference per triangle (40 bytes a triangle) is
+  // dropped while it runs and made again, the same, for the collapse and the file. Split
+  // references (sbvh) are the builder's own and stay.
+  const bool remade = refs.size() == mesh.triangle_count() && builder.name != "sbvh";
+  if (remade) refs = PrimitiveRefs{};
   r.report = optimize_insertion(bvh, insertion);
+  if (remade) refs = make_references(mesh);
   r.optimize_seconds = r.report.seconds;
   r.cost_optimized = r.report.final_cost;
 
@@ -100,16 +116,16 @@ BakeResult bake(const BakeOptions& opt) {
   Stopwatch collapse_clock;
   CollapseConfig collapse;
   collapse.cost = cost;
-  const CollapseResult c = collapse_leaves(bvh, collapse);
+  // With split references a leaf keeps each triangle once and the cost counts triangles.
+  const CollapseResult c = collapse_leaves(bvh, refs, collapse);
   r.collapse_seconds = collapse_clock.seconds();
   r.cost_final = c.cost_after;
   r.leaves = c.leaves_after;
   // The file holds the binary tree: trace and render rebuild their wide layout (--layout
   // bvh4|bvh8, wide_bvh.h) from it on load. A stored wide layout would be written here.
 
-  const BvhFileInfo info = scene_info(mesh, cost, "sweep+insertion+collapse");
+  const BvhFileInfo info = scene_info(mesh, cost, r.builder + "+insertion+collapse");
   progress.update("writing " + opt.output, true);
-  refs = make_references(mesh);
   write_bvh_file(opt.output, bvh, refs, info);
   progress.finish();
   r.peak_rss = peak_rss_bytes();
@@ -120,6 +136,8 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
   print_json({{"scene", opt.scene.spec},
               {"triangles", r.triangles},
               {"quality", opt.quality},
+              {"builder", r.builder},
+              {"references", r.references},
               {"threads", opt.threads.effective()},
               {"load_seconds", r.load_seconds},
               {"build_seconds", r.build_seconds},
@@ -140,7 +158,7 @@ void print_bake_summary(const BakeOptions& opt, const BakeResult& r) {
   const double mib = 1024.0 * 1024.0;
   std::cout << "scene      " << opt.scene.spec << " (" << r.triangles << " triangles, loaded in "
             << format_double(r.load_seconds, 2) << " s)\n"
-            << "build      sweep SAH, cost " << format_double(r.cost_built, 4) << ", "
+            << "build      " << r.builder << " (" << r.references << " references), cost " << format_double(r.cost_built, 4) << ", "
             << format_double(r.build_seconds, 2) << " s\n"
             << "optimize   insertion, cost " << format_double(r.cost_optimized, 4) << ", "
             << format_double(r.optimize_seconds, 2) << " s, " << r.report.passes << " passes ("
@@ -166,6 +184,10 @@ void register_bake_command(CLI::App& app) {
                   "fast: optimize for 1x the build time | balanced: 5x | best: until the optimizer converges")
       ->check(CLI::IsMember({"fast", "balanced", "best"}))
       ->capture_default_str();
+  opt->builder.name.clear();
+  opt->builder.add_to(cmd);
+  cmd->get_option("--builder")->description(cmd->get_option("--builder")->get_description() +
+                                            ". Default: sbvh for --quality best, sweep otherwise");
   cmd->add_option("--time-budget", opt->time_budget,
                   "The optimizer's budget instead of the quality's, in seconds or as a multiple of the build time: 3x")
       ->type_name("S|Nx");

@@ -10,6 +10,7 @@
 #include "bvhopt/leaf_dedup.h"
 #include "bvhopt/stats.h"
 #include "bvhopt/atomic_file.h"
+#include "bvhopt/triangle_cost.h"
 #include "cli_common.h"
 #include "commands.h"
 
@@ -77,10 +78,12 @@ void run_build(const BuildCommandOptions& opt) {
   progress.update("building " + std::to_string(mesh.triangle_count()) + " triangles with " + opt.builder, true);
   Stopwatch build_clock;
   std::string evh_report;
-  PrimitiveRefs refs = opt.evh.make_refs(mesh, &evh_report);
-  Bvh bvh = build_bvh(refs, options);
-  // Over subdivided references a leaf keeps one reference per triangle.
-  if (opt.evh.enabled) dedup_leaf_references(bvh, refs);
+  BuiltTree built = build_tree(mesh, opt.evh.make_refs(mesh, &evh_report), options);
+  Bvh& bvh = built.bvh;
+  const PrimitiveRefs& refs = built.refs;
+  // Over subdivided references a leaf keeps one reference per triangle (the sbvh builder's
+  // leaves already do).
+  if (opt.evh.enabled && options.kind != BuilderKind::spatial_split) dedup_leaf_references(bvh, refs);
   double build_s = build_clock.seconds();
 
   const BvhFileInfo info = scene_info(mesh, options.cost, opt.evh.enabled ? "evh+" + opt.builder : opt.builder);
@@ -88,7 +91,7 @@ void run_build(const BuildCommandOptions& opt) {
   write_bvh_file(opt.output, bvh, refs, info);
   progress.finish();
 
-  print_build_summary(opt, mesh, refs, compute_stats(bvh, options.cost), load_s, build_s, evh_report);
+  print_build_summary(opt, mesh, refs, compute_stats(bvh, refs, options.cost), load_s, build_s, evh_report);
 }
 
 }  // namespace
@@ -99,7 +102,7 @@ void register_build_command(CLI::App& app) {
   opt->scene.add_to(cmd);
   std::vector<std::string> names;
   std::string names_help;
-  for (BuilderKind kind : all_builders()) {
+  for (BuilderKind kind : all_mesh_builders()) {
     names.emplace_back(builder_name(kind));
     names_help += (names_help.empty() ? "" : " | ") + names.back();
   }
@@ -113,6 +116,7 @@ void register_build_command(CLI::App& app) {
                       "bins (up to " + std::to_string(kMaxBinCount) + ") and small ones fewer")
           ->check(CLI::Range(kMinBinCount, kMaxBinCount))
           ->capture_default_str();
+  add_budget_option(cmd, opt->build.sbvh);
   opt->evh.add_to(cmd);
   opt->cost.add_to(cmd);
   opt->threads.add_to(cmd);

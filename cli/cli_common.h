@@ -10,10 +10,12 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "bvhopt/build.h"
 #include "bvhopt/cost_model.h"
 #include "bvhopt/edge_volume_subdivision.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/references.h"
+#include "bvhopt/spatial_split_builder.h"
 #include "bvhopt/vec3.h"
 
 namespace bvhopt::cli {
@@ -58,6 +60,18 @@ struct EvhOption {
   // One reference per triangle, or the subdivided references when enabled; `report` gets a
   // line saying what was done (empty when not enabled).
   PrimitiveRefs make_refs(const Mesh& mesh, std::string* report = nullptr) const;
+};
+
+// --budget R: the sbvh builder's most references per triangle (SpatialSplitParams::budget).
+void add_budget_option(CLI::App* app, SpatialSplitParams& params);
+
+// --builder NAME [--budget R] for the commands that build a scene to optimize it (bake,
+// optimize): leaves of one reference, the optimizers' starting point.
+struct SceneBuilderOption {
+  std::string name = "sweep";
+  SpatialSplitParams sbvh;
+  void add_to(CLI::App* app);
+  BuiltTree build(const Mesh& mesh, PrimitiveRefs refs, const CostModel& cost) const;
 };
 
 // --ct / --ci: the SAH cost constants.

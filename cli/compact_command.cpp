@@ -4,6 +4,7 @@
 
 #include "bvhopt/bvh_file.h"
 #include "bvhopt/collapse_leaves.h"
+#include "bvhopt/triangle_cost.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
 #include "bvhopt/leaf_dedup.h"
@@ -31,18 +32,19 @@ void run_compact(const CompactOptions& opt) {
   BvhFile file = read_bvh_file(opt.input);
   const double load_s = load_clock.seconds();
   const CostModel cost = file.info.cost;
-  const double ocost_before = optimal_collapse_cost(file.bvh, cost, opt.max_leaf_size);
+  const double ocost_before = optimal_collapse_cost(file.bvh, file.refs, cost, opt.max_leaf_size);
 
   Stopwatch clock;
   CollapseConfig cfg;
   cfg.cost = cost;
   cfg.max_leaf_size = opt.max_leaf_size;
-  CollapseResult r = collapse_leaves(file.bvh, cfg);
+  // Each triangle once per leaf: a collapsed leaf keeps one reference per triangle.
+  CollapseResult r = collapse_leaves(file.bvh, file.refs, cfg);
   // A tree over subdivided references (--evh) may now hold one triangle twice in a
   // leaf; keep one. Without subdivision this changes nothing.
   dedup_leaf_references(file.bvh, file.refs);
   const double compact_s = clock.seconds();
-  const double ocost_after = optimal_collapse_cost(file.bvh, cost, opt.max_leaf_size);
+  const double ocost_after = optimal_collapse_cost(file.bvh, file.refs, cost, opt.max_leaf_size);
 
   BvhFileInfo info = file.info;
   info.method = (info.method.empty() ? std::string("unknown") : info.method) + "+compact";

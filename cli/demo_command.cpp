@@ -83,16 +83,17 @@ struct DemoRun {
   } best{};
   std::vector<DemoRow> rows{};
 
-  void measure(const std::string& method, double seconds, const Bvh& bvh);
+  // `tree_refs`: the references the tree names when its builder made its own (sbvh).
+  void measure(const std::string& method, double seconds, const Bvh& bvh, const PrimitiveRefs* tree_refs = nullptr);
 };
 
-void DemoRun::measure(const std::string& method, double seconds, const Bvh& bvh) {
+void DemoRun::measure(const std::string& method, double seconds, const Bvh& bvh, const PrimitiveRefs* tree_refs) {
   DemoRow row;
   row.method = method;
   row.seconds = seconds;
   row.stats = compute_stats(bvh, model);
   progress.update("tracing: " + row.method, true);
-  const FlatBvh flat = finalize(bvh, refs);
+  const FlatBvh flat = finalize(bvh, tree_refs ? *tree_refs : refs);
   Tracer tracer(flat, mesh);
   const std::unique_ptr<WideTracer> wide = make_wide_tracer(flat, mesh, opt.layout.layout());
   const AnyTracer traced = wide ? AnyTracer(*wide) : AnyTracer(tracer);
@@ -128,19 +129,19 @@ std::pair<Bvh, double> run_builders(DemoRun& run) {
   ProgressLine& progress = run.progress;
   Bvh sweep;
   double sweep_s = 0.0;
-  for (BuilderKind kind : all_builders()) {
+  for (BuilderKind kind : all_mesh_builders()) {
     progress.update("building: " + std::string(builder_name(kind)), true);
     BuildOptions options;
     options.kind = kind;
     options.cost = run.model;
     Stopwatch clock;
-    Bvh bvh = build_bvh(run.refs, options);
+    BuiltTree built = build_tree(run.mesh, run.refs, options);
     double s = clock.seconds();
     if (kind == BuilderKind::sweep_sah) {
-      sweep = bvh;
+      sweep = built.bvh;
       sweep_s = s;
     }
-    run.measure(std::string(builder_name(kind)), s, bvh);
+    run.measure(std::string(builder_name(kind)), s, built.bvh, &built.refs);
   }
   return {sweep, sweep_s};
 }

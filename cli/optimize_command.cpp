@@ -19,7 +19,7 @@
 #include "bvhopt/insertion_optimizer.h"
 #include "bvhopt/optimizer_method.h"
 #include "bvhopt/references.h"
-#include "bvhopt/sweep_sah_builder.h"
+#include "bvhopt/triangle_cost.h"
 #include "bvhopt/tree_rotations.h"
 #include "cli_common.h"
 #include "commands.h"
@@ -31,6 +31,7 @@ namespace {
 struct OptimizeOptions {
   SceneOption input;
   EvhOption evh;
+  SceneBuilderOption builder;
   ThreadsOption threads;
   CostOption cost;
   bool cost_given = false;  // --ct or --ci given: they replace a BVH file's own cost model
@@ -146,7 +147,8 @@ struct Loaded {
 };
 
 // A path ending in .bvh is a BVH file; anything else is a scene, built with sweep SAH.
-Loaded load_input(const SceneOption& scene, const EvhOption& evh, const CostModel& cost, bool cost_given) {
+Loaded load_input(const SceneOption& scene, const EvhOption& evh, const SceneBuilderOption& builder,
+                  const CostModel& cost, bool cost_given) {
   Loaded in;
   Stopwatch clock;
   if (std::filesystem::path(scene.spec).extension() == ".bvh") {
@@ -163,13 +165,11 @@ Loaded load_input(const SceneOption& scene, const EvhOption& evh, const CostMode
   Mesh mesh = scene.load();
   in.load_seconds = clock.seconds();
   Stopwatch build_clock;
-  in.refs = evh.make_refs(mesh);
-  SweepSahConfig sweep;
-  sweep.cost = cost;
-  sweep.leaf.max_leaf_size = 1;
-  in.bvh = build_sweep_sah(in.refs, sweep);
+  BuiltTree built = builder.build(mesh, evh.make_refs(mesh), cost);
+  in.bvh = std::move(built.bvh);
+  in.refs = std::move(built.refs);
   in.build_seconds = build_clock.seconds();
-  in.info = scene_info(mesh, cost, evh.enabled ? "evh+sweep" : "sweep");
+  in.info = scene_info(mesh, cost, (evh.enabled ? "evh+" : "") + builder.name);
   return in;
 }
 
@@ -210,7 +210,7 @@ void print_summary(const OptimizeOptions& opt, const Loaded& in, const BvhFileIn
                    double ocost) {
   const double ratio = report.initial_cost > 0 ? report.final_cost / report.initial_cost : 1.0;
   std::cout << "input      " << opt.input.spec << " (" << info.scene_triangles << " triangles"
-            << (in.build_seconds > 0 ? ", sweep SAH built in " + format_double(in.build_seconds, 2) + " s" : "")
+            << (in.build_seconds > 0 ? ", built in " + format_double(in.build_seconds, 2) + " s" : "")
             << ")\n"
             << "method     " << opt.method << ", " << opt.threads.effective() << " threads, seed " << opt.shared.seed
             << "\n"
@@ -229,7 +229,7 @@ void run_optimize(const OptimizeOptions& opt) {
   check_output_path(opt.output, "-o");
   if (!opt.trace_path.empty()) check_output_path(opt.trace_path, "--cost-trace");
   auto threads = opt.threads.apply();
-  Loaded in = load_input(opt.input, opt.evh, opt.cost.model(), opt.cost_given);
+  Loaded in = load_input(opt.input, opt.evh, opt.builder, opt.cost.model(), opt.cost_given);
   const std::optional<OptimizerMethod> method = parse_optimizer_method(opt.method);
   if (!method) throw Error("optimize: unknown method '" + opt.method + "'");
 
@@ -253,7 +253,7 @@ void run_optimize(const OptimizeOptions& opt) {
   outputs.add(opt.output, [&](const std::filesystem::path& tmp) { write_bvh_file(tmp, in.bvh, in.refs, info); });
   if (!opt.trace_path.empty()) outputs.add_text(opt.trace_path, trace_csv(report));
   outputs.commit();
-  const double ocost = optimal_collapse_cost(in.bvh, info.cost);
+  const double ocost = optimal_collapse_cost(in.bvh, in.refs, info.cost);
   if (opt.json)
     print_report_json(opt, in, info, report, ocost);
   else
@@ -292,6 +292,7 @@ void register_optimize_command(CLI::App& app) {
       ->excludes("--time-limit");
   cmd->add_option("--seed", opt->shared.seed, "Seed of every random choice")->check(whole_number(0, UINT64_MAX))->capture_default_str();
   cmd->add_option("--cost-trace", opt->trace_path, "Write the cost after every pass as CSV")->type_name("FILE.csv");
+  opt->builder.add_to(cmd);
   opt->evh.add_to(cmd);
   opt->cost.add_to(cmd);
   opt->threads.add_to(cmd);

@@ -4,6 +4,7 @@
 #include "bvhopt/bvh_file.h"
 #include "bvhopt/finalize.h"
 #include "bvhopt/stats.h"
+#include "bvhopt/triangle_cost.h"
 #include "bvhopt/wide_bvh.h"
 #include "cli_common.h"
 #include "commands.h"
@@ -28,7 +29,8 @@ void run_stats(const StatsOptions& opt) {
   CostModel model = file.info.cost;
   if (opt.ct_given) model.traversal = opt.cost.traversal;
   if (opt.ci_given) model.intersection = opt.cost.intersection;
-  TreeStats st = compute_stats(file.bvh, model);
+  // Each triangle once per leaf, however many of its references the leaf holds.
+  TreeStats st = compute_stats(file.bvh, file.refs, model);
   const size_t triangles = count_distinct_triangles(file.bvh, file.refs);
   // The wide SAH cost (wide_bvh.h) of the SAH-optimal collapses the wide layouts trace.
   double wide_sah[2] = {0.0, 0.0};

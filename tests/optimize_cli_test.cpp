@@ -12,6 +12,8 @@
 
 #include "bvhopt/bvh_file.h"
 #include "bvhopt/cost.h"
+#include "bvhopt/leaf_dedup.h"
+#include "bvhopt/triangle_cost.h"
 #include "bvhopt/validate.h"
 #include "test_support.h"
 
@@ -122,16 +124,32 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
       << err;
   nlohmann::json j = nlohmann::json::parse(out);
   EXPECT_EQ(j["quality"], "best");
+  EXPECT_EQ(j["builder"], "sbvh");  // best builds with spatial splits (docs/spatial-splits.md)
+  EXPECT_LE(j["references"].get<double>(), 1.3 * j["triangles"].get<double>());
   EXPECT_EQ(j["stop_reason"], "converged");  // best has no budget
   EXPECT_EQ(j["time_budget_seconds"], 0.0);
   EXPECT_LT(j["cost_optimized"].get<double>(), j["cost_built"].get<double>());
   EXPECT_LT(j["cost"].get<double>(), j["cost_optimized"].get<double>());  // collapsing one-triangle leaves gains
   EXPECT_GT(j["peak_rss_bytes"].get<uint64_t>(), 0u);
   BvhFile file = read_bvh_file(a);
-  EXPECT_TRUE(validate(file.bvh, file.refs).ok());
-  EXPECT_EQ(file.info.method, "sweep+insertion+collapse");
+  // Collapsed leaves keep one reference per triangle: the dropped pieces are in no leaf.
+  EXPECT_TRUE(validate_deduplicated(file.bvh, file.refs).ok());
+  EXPECT_EQ(file.info.method, "sbvh+insertion+collapse");
+  // Each leaf then holds distinct triangles: both costs are the same.
   EXPECT_NEAR(sah_cost(file.bvh, file.info.cost), j["cost"].get<double>(), 1e-9 * j["cost"].get<double>());
+  EXPECT_NEAR(sah_cost(file.bvh, file.refs, file.info.cost), j["cost"].get<double>(), 1e-9 * j["cost"].get<double>());
   EXPECT_EQ(file.info.scene_triangles, j["triangles"].get<uint64_t>());
+
+  // Another builder on request, and sweep for the other qualities.
+  ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality fast --json -o " + a.string(), &out, &err), 0) << err;
+  EXPECT_EQ(nlohmann::json::parse(out)["builder"], "sweep");
+  ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --builder sbvh --budget 1.1 --json -o " + a.string(), &out, &err),
+            0)
+      << err;
+  j = nlohmann::json::parse(out);
+  EXPECT_EQ(j["builder"], "sbvh");
+  EXPECT_LE(j["references"].get<double>(), 1.1 * j["triangles"].get<double>());
+  EXPECT_NE(run("bake 'builtin:atrium?triangles=4000' --budget 0.5 -o " + a.string()), 0);
 
   // An explicit budget replaces the quality's and is reported in seconds.
   ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --time-budget 0 --json -o " + a.string(), &out, &err), 0) << err;

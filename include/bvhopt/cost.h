@@ -59,6 +59,10 @@ struct CollapseCosts {
   std::vector<uint8_t> collapse;
 };
 CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size);
+// The same recurrence with t(N) given per node (`count`, indexed by node): the leaves'
+// and subtrees' triangle counts of triangle_cost.h instead of their reference counts.
+CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size,
+                             const std::vector<uint64_t>& count);
 
 // The cost after the best collapse of subtrees into leaves (Bittner's `ocost`), without
 // changing the tree: bottom-up, a subtree becomes a leaf wherever c_I * SA(N) * t(N) is no

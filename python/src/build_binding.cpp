@@ -17,7 +17,7 @@ namespace {
 
 std::string known_builders() {
   std::string s;
-  for (BuilderKind k : all_builders()) s += (s.empty() ? "" : ", ") + std::string(builder_name(k));
+  for (BuilderKind k : all_mesh_builders()) s += (s.empty() ? "" : ", ") + std::string(builder_name(k));
   return s;
 }
 
@@ -34,7 +34,7 @@ std::optional<EdgeVolumeConfig> evh_config(const py::object& evh) {
 }
 
 Tree build(const Scene& scene, const std::string& builder, uint32_t leaf_size, double c_t, double c_i,
-           std::optional<int> threads, const py::object& evh, std::optional<uint32_t> bins) {
+           std::optional<int> threads, const py::object& evh, std::optional<uint32_t> bins, double budget) {
   BuildOptions options;
   const auto kind = parse_builder(builder);
   if (!kind) throw Error("build: unknown builder '" + builder + "' (known: " + known_builders() + ")");
@@ -45,16 +45,20 @@ Tree build(const Scene& scene, const std::string& builder, uint32_t leaf_size, d
     options.binned.bin_count = *bins;
     options.binned.refs_per_bin = 0;
   }
+  options.sbvh.budget = budget;
   validate(options);
   const std::optional<EdgeVolumeConfig> subdivide = evh_config(evh);
   Tree tree;
   {
     py::gil_scoped_release unlocked;
     auto limit = limit_threads(threads, "build");
-    tree.refs = subdivide ? subdivide_edge_volume(scene.mesh, *subdivide).refs : make_references(scene.mesh);
-    tree.bvh = build_bvh(tree.refs, options);
-    // Over subdivided references a leaf keeps one reference per triangle (as the command line).
-    if (subdivide) dedup_leaf_references(tree.bvh, tree.refs);
+    BuiltTree built = build_tree(
+        scene.mesh, subdivide ? subdivide_edge_volume(scene.mesh, *subdivide).refs : make_references(scene.mesh), options);
+    tree.bvh = std::move(built.bvh);
+    tree.refs = std::move(built.refs);
+    // Over subdivided references a leaf keeps one reference per triangle (as the command
+    // line; the sbvh builder's leaves already do).
+    if (subdivide && options.kind != BuilderKind::spatial_split) dedup_leaf_references(tree.bvh, tree.refs);
   }
   tree.info = scene_info(scene.mesh, options.cost, subdivide ? "evh+" + builder : builder);
   return tree;
@@ -72,13 +76,14 @@ Tree load(const py::object& path) {
 void register_build(py::module_& m) {
   m.def("build", &build, py::arg("scene"), py::arg("builder") = "sweep", py::arg("leaf_size") = 1,
         py::arg("c_t") = 3.0, py::arg("c_i") = 2.0, py::arg("threads") = py::none(), py::arg("evh") = py::none(),
-        py::arg("bins") = py::none(),
-        "Builds a BVH top-down: builder 'sweep' | 'binned' | 'spatial-median' | 'object-median'; evh=True (or "
-        "the exponent t) subdivides fat triangles first. The tree does not depend on threads.");
+        py::arg("bins") = py::none(), py::arg("budget") = SpatialSplitParams{}.budget,
+        "Builds a BVH top-down: builder 'sweep' | 'binned' | 'spatial-median' | 'object-median' | 'sbvh' "
+        "(spatial splits, at most budget x triangles references); evh=True (or the exponent t) subdivides fat "
+        "triangles first. The tree does not depend on threads.");
   m.def("load", &load, py::arg("path"), "Reads a BVH file written by Bvh.save or the command line");
   m.def("builders", [] {
     py::list names;
-    for (BuilderKind k : all_builders()) names.append(std::string(builder_name(k)));
+    for (BuilderKind k : all_mesh_builders()) names.append(std::string(builder_name(k)));
     return names;
   });
 }

@@ -7,6 +7,7 @@
 
 #include "bindings.h"
 #include "bvhopt/collapse_leaves.h"
+#include "bvhopt/triangle_cost.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
 #include "bvhopt/stats.h"
@@ -58,7 +59,7 @@ py::array_t<uint32_t> leaf_triangles(const Tree& t) {
 }
 
 py::dict stats_of(const Tree& t) {
-  TreeStats st = compute_stats(t.bvh, t.info.cost);
+  TreeStats st = compute_stats(t.bvh, t.refs, t.info.cost);  // each triangle once per leaf
   py::dict d;
   d["cost"] = st.cost;
   d["ocost"] = st.ocost;
@@ -94,7 +95,7 @@ py::dict collapse(Tree& t, uint32_t max_leaf_size) {
   CollapseResult r;
   {
     py::gil_scoped_release unlocked;
-    r = collapse_leaves(t.bvh, config);
+    r = collapse_leaves(t.bvh, t.refs, config);  // keeps each triangle once per leaf
   }
   t.info.method = (t.info.method.empty() ? std::string("unknown") : t.info.method) + "+compact";
   py::dict d;
@@ -112,9 +113,9 @@ py::dict collapse(Tree& t, uint32_t max_leaf_size) {
 void register_tree(py::module_& m) {
   PYBIND11_NUMPY_DTYPE(NodeRecord, min, max, area, parent, left, right, first, count);
   py::class_<Tree> tree(m, "Bvh", "A binary BVH over a scene's triangles (from bvhopt.build or bvhopt.load)");
-  tree.def_property_readonly("cost", [](const Tree& t) { return sah_cost(t.bvh, t.info.cost); },
-                             "SAH cost, normalized by the root's area")
-      .def_property_readonly("ocost", [](const Tree& t) { return optimal_collapse_cost(t.bvh, t.info.cost); },
+  tree.def_property_readonly("cost", [](const Tree& t) { return sah_cost(t.bvh, t.refs, t.info.cost); },
+                             "SAH cost, normalized by the root's area (each triangle once per leaf)")
+      .def_property_readonly("ocost", [](const Tree& t) { return optimal_collapse_cost(t.bvh, t.refs, t.info.cost); },
                              "SAH cost after the best collapse of subtrees into leaves")
       .def_property_readonly("method", [](const Tree& t) { return t.info.method; })
       .def_property_readonly("scene_name", [](const Tree& t) { return t.info.scene_name; })

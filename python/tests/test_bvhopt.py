@@ -40,7 +40,7 @@ def test_scene_from_arrays_round_trips(scene):
     assert bvhopt.build(copy).cost == bvhopt.build(scene).cost
 
 
-@pytest.mark.parametrize("builder", ["sweep", "binned", "spatial-median", "object-median"])
+@pytest.mark.parametrize("builder", ["sweep", "binned", "spatial-median", "object-median", "sbvh"])
 def test_build_cost_equals_the_command_line(cli, tmp_path, scene, builder):
     ref = run_cli(cli, "build", SCENE, "--builder", builder, "--leaf-size", "4", "-o", str(tmp_path / "a.bvh"))
     bvh = bvhopt.build(scene, builder=builder, leaf_size=4)

@@ -6,6 +6,7 @@
 #include "bvhopt/binned_sah_builder.h"
 #include "bvhopt/error.h"
 #include "bvhopt/median_builder.h"
+#include "bvhopt/spatial_split_builder.h"
 #include "bvhopt/sweep_sah_builder.h"
 
 namespace bvhopt {
@@ -39,6 +40,16 @@ void validate(const BinnedSahConfig& config) {
   check_range("bin_count", config.bin_count, kMinBinCount, kMaxBinCount);
   check_range("max_bin_count", config.max_bin_count, kMinBinCount, kMaxBinCount);
   check_range("exact_sweep_below", config.exact_sweep_below, 0, kMaxExactSweepBelow);
+}
+
+void validate(const SpatialSplitConfig& config) {
+  validate(static_cast<const BuilderConfig&>(config));
+  if (!std::isfinite(config.budget) || config.budget < 1.0)
+    throw Error("budget is " + std::to_string(config.budget) + ", must be finite and >= 1 (references per triangle)");
+  check_cost("alpha", config.alpha);
+  check_range("spatial_bins", config.spatial_bins, kMinBinCount, kMaxBinCount);
+  check_range("object_bins", config.object_bins, kMinBinCount, kMaxBinCount);
+  check_range("exact_sweep_below", config.exact_sweep_below, 0, 65536);
 }
 
 }  // namespace bvhopt

@@ -58,20 +58,28 @@ double sah_cost(const Bvh& bvh, const CostModel& model) {
 }
 
 CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size) {
+  std::vector<uint64_t> count(bvh.nodes.size(), 0);
+  if (!bvh.empty())
+    for (uint32_t n : bvh.post_order()) {
+      const BvhNode& nd = bvh[n];
+      count[n] = nd.is_leaf() ? nd.ref_count() : count[nd.left()] + count[nd.right()];
+    }
+  return collapse_costs(bvh, model, max_leaf_size, count);
+}
+
+CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size,
+                             const std::vector<uint64_t>& count) {
   CollapseCosts out;
   out.best.assign(bvh.nodes.size(), 0.0);
   out.collapse.assign(bvh.nodes.size(), 0);
   if (bvh.empty()) return out;
   const CostWeights w(bvh);
-  std::vector<uint64_t> count(bvh.nodes.size(), 0);
   for (uint32_t n : bvh.post_order()) {
     const BvhNode& nd = bvh[n];
     if (nd.is_leaf()) {
-      count[n] = nd.ref_count();
-      out.best[n] = leaf_cost(w(nd), nd.ref_count(), model);
+      out.best[n] = leaf_cost(w(nd), static_cast<uint32_t>(count[n]), model);
       continue;
     }
-    count[n] = count[nd.left()] + count[nd.right()];
     const double as_tree = model.traversal * w(nd) + out.best[nd.left()] + out.best[nd.right()];
     const bool may_collapse = max_leaf_size == 0 || count[n] <= max_leaf_size;
     const double as_leaf = model.intersection * w(nd) * static_cast<double>(count[n]);

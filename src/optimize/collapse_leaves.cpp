@@ -3,18 +3,15 @@
 #include <vector>
 
 #include "bvhopt/cost.h"
+#include "bvhopt/leaf_dedup.h"
+#include "bvhopt/triangle_cost.h"
 
 namespace bvhopt {
+namespace {
 
-CollapseResult collapse_leaves(Bvh& bvh, const CollapseConfig& config) {
-  CollapseResult result;
-  if (bvh.empty()) return result;
-  const CostModel& m = config.cost;
-  result.cost_before = sah_cost(bvh, m);
-
-  // The recurrence of optimal_collapse_cost, so the collapsed tree's cost equals the `ocost`
-  // computed on the tree before.
-  const std::vector<uint8_t> collapse = collapse_costs(bvh, m, config.max_leaf_size).collapse;
+// Collapses the nodes `collapse` marks (the recurrence of optimal_collapse_cost, so the
+// collapsed tree's cost equals the `ocost` computed on the tree before); fills the counts.
+void collapse_marked(Bvh& bvh, const std::vector<uint8_t>& collapse, CollapseResult& result) {
   for (uint32_t n : bvh.post_order()) {
     result.nodes_before++;
     result.leaves_before += bvh[n].is_leaf();
@@ -58,10 +55,37 @@ CollapseResult collapse_leaves(Bvh& bvh, const CollapseConfig& config) {
   }
   bvh.ref_indices = std::move(new_refs);
   bvh.renumber_depth_first();
+}
 
+void count_after(const Bvh& bvh, CollapseResult& result) {
   for (const BvhNode& nd : bvh.nodes) result.leaves_after += nd.is_leaf();
   result.nodes_after = bvh.nodes.size();
-  result.cost_after = sah_cost(bvh, m);
+}
+
+}  // namespace
+
+CollapseResult collapse_leaves(Bvh& bvh, const CollapseConfig& config) {
+  CollapseResult result;
+  if (bvh.empty()) return result;
+  result.cost_before = sah_cost(bvh, config.cost);
+  collapse_marked(bvh, collapse_costs(bvh, config.cost, config.max_leaf_size).collapse, result);
+  count_after(bvh, result);
+  result.cost_after = sah_cost(bvh, config.cost);
+  return result;
+}
+
+CollapseResult collapse_leaves(Bvh& bvh, const PrimitiveRefs& refs, const CollapseConfig& config) {
+  CollapseResult result;
+  if (bvh.empty()) return result;
+  result.cost_before = sah_cost(bvh, refs, config.cost);
+  const std::vector<uint64_t> triangles = subtree_triangle_counts(bvh, refs);
+  collapse_marked(bvh, collapse_costs(bvh, config.cost, config.max_leaf_size, triangles).collapse, result);
+  // Only a leaf holding one triangle twice changes, so on trees without split references
+  // this is the plain collapse.
+  const LeafDedupStats dedup = dedup_leaf_references(bvh, refs);
+  result.dropped_references = dedup.slots_before - dedup.slots_after;
+  count_after(bvh, result);
+  result.cost_after = sah_cost(bvh, refs, config.cost);
   return result;
 }
 

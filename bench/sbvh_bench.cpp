@@ -1,0 +1,417 @@
+// Spatial-split benchmark (issue 12).
+//
+//   sbvh_bench [--scenes DIR] [--scene FILE]... [--runs 5] [--threads 2] [--budget 1.3]
+//              [--embree-budget 1.5] [--opt-seconds S] [--no-embree] [--json FILE]
+//   sbvh_bench --compare [--rotate 0,30] [--rays N] [--opt-seconds S] ...
+//
+// Default table, per shared scene: our SBVH build (build_spatial_split, budget --budget)
+// and Embree HIGH (rtcBuildBVH with RTC_BUILD_QUALITY_HIGH, spatial splits through a
+// splitPrimitive callback that clips the triangle exactly, room for --embree-budget times
+// the references), both on --threads threads, timed interleaved in the same run (median of
+// --runs, wall and process CPU time): references per second and per triangle, cost and
+// ocost (counting each triangle once per leaf); then our tree after insertion optimization
+// (to convergence, or --opt-seconds) and its ocost, beside the issue's best split peer
+// figures (tinybvh BuildHQ + Optimize(50, extreme), or Embree HIGH; c_T = 3, c_I = 2).
+//
+// --compare: the edge volume heuristic beside spatial splits, per scene unrotated and
+// rotated by (30, 30, 0): sweep, sweep + EVH, SBVH and SBVH + EVH, each built (median of
+// --runs) and then optimized by insertion (--opt-seconds each, default 20): references per
+// triangle, cost, build time and rays per second of the optimized tree in the bvh8 layout
+// (primary and random rays made once per scene from the sweep tree, the same for all four;
+// median of 3 passes, process CPU time over the thread count).
+#ifdef BVHOPT_HAVE_EMBREE
+#include <embree3/rtcore.h>
+
+#include "embree_build.h"
+#endif
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "bench_support.h"
+#include "bvhopt/any_tracer.h"
+#include "bvhopt/build.h"
+#include "bvhopt/cost.h"
+#include "bvhopt/edge_volume_subdivision.h"
+#include "bvhopt/error.h"
+#include "bvhopt/finalize.h"
+#include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/ray_measure.h"
+#include "bvhopt/ray_sets.h"
+#include "bvhopt/scene_file.h"
+#include "bvhopt/spatial_split_builder.h"
+#include "bvhopt/tracer.h"
+#include "bvhopt/triangle_clipping.h"
+#include "bvhopt/triangle_cost.h"
+#include "bvhopt/wide_tracer.h"
+
+namespace bvhopt::bench {
+namespace {
+
+// The issue's best split peer per scene: cost with leaves of one reference, and ocost.
+struct PeerFigures {
+  const char* scene;  // start of the file name, lower case
+  double cost, ocost;
+};
+constexpr PeerFigures kPeers[] = {
+    {"2cylinderengine", 248.53, 219.57}, {"armadillo", 80.86, 76.82}, {"beast", 59.92, 56.53},
+    {"bunny", 94.53, 89.94},             {"classroom", 13.39, 10.41}, {"conference", 92.34, 80.67},
+    {"horse", 68.25, 64.93},             {"nefertiti", 104.04, 98.77}, {"ogre", 78.67, 74.48},
+    {"sponza", 164.58, 142.72},          {"staircase", 42.25, 37.95},
+};
+
+const PeerFigures* peer_of(const std::string& scene) {
+  std::string lower = scene;
+  for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  for (const PeerFigures& p : kPeers)
+    if (lower.rfind(p.scene, 0) == 0) return &p;
+  return nullptr;
+}
+
+struct Options {
+  SceneOptions scenes = SceneOptions::files_only();
+  int runs = 5;
+  int threads = 2;
+  double budget = 1.3;
+  double embree_budget = 1.5;
+  double opt_seconds = -1.0;  // < 0: the mode's default
+  bool embree = true;
+  bool compare = false;
+  std::vector<float> rotations{0.0f, 30.0f};
+  uint64_t rays = 200000;
+  std::string json_path;
+};
+
+Options parse(int argc, char** argv) {
+  Options o;
+  Args args(argc, argv, "sbvh_bench");
+  while (args.next()) {
+    const std::string& a = args.current();
+    if (read_scene_option(args, o.scenes)) continue;
+    if (a == "--runs") o.runs = std::max(1, std::stoi(args.value()));
+    else if (a == "--threads") o.threads = std::max(1, std::stoi(args.value()));
+    else if (a == "--budget") o.budget = std::stod(args.value());
+    else if (a == "--embree-budget") o.embree_budget = std::stod(args.value());
+    else if (a == "--opt-seconds") o.opt_seconds = std::stod(args.value());
+    else if (a == "--no-embree") o.embree = false;
+    else if (a == "--compare") o.compare = true;
+    else if (a == "--rays") o.rays = std::stoull(args.value());
+    else if (a == "--rotate") {
+      o.rotations.clear();
+      for (auto& r : split_list(args.value())) o.rotations.push_back(std::stof(r));
+    } else if (a == "--json") o.json_path = args.value();
+    else if (a == "--help" || a == "-h") {
+      std::cout << "sbvh_bench [--scenes DIR] [--scene FILE]... [--runs 5] [--threads 2] [--budget 1.3]\n"
+                   "           [--embree-budget 1.5] [--opt-seconds S] [--no-embree] [--json FILE]\n"
+                   "sbvh_bench --compare [--rotate 0,30] [--rays N] [--opt-seconds 20] ...\n";
+      std::exit(0);
+    } else {
+      throw Error("sbvh_bench: unknown option '" + a + "' (try --help)");
+    }
+  }
+  return o;
+}
+
+// Wall and CPU seconds of one call.
+struct Timing {
+  double wall = 0.0, cpu = 0.0;
+};
+Timing time_call(const std::function<void()>& f) {
+  const double c0 = process_cpu_seconds();
+  Timing t;
+  t.wall = seconds_of(f);
+  t.cpu = process_cpu_seconds() - c0;
+  return t;
+}
+
+// A tree and what it is measured by.
+struct Tree {
+  Bvh bvh;
+  PrimitiveRefs refs;
+};
+
+#ifdef BVHOPT_HAVE_EMBREE
+// ---- Embree HIGH through rtcBuildBVH, with spatial splits.
+
+struct EmbreeUser {
+  const Mesh* mesh;
+};
+
+// The same exact clipping as ours: the triangle cut at the plane, each side's bounds within
+// the piece's box.
+void embree_split(const RTCBuildPrimitive* prim, unsigned int dim, float pos, RTCBounds* left, RTCBounds* right,
+                  void* user) {
+  const Mesh& mesh = *static_cast<EmbreeUser*>(user)->mesh;
+  const Box box(Vec3(prim->lower_x, prim->lower_y, prim->lower_z), Vec3(prim->upper_x, prim->upper_y, prim->upper_z));
+  ClipPolygon below, above;
+  split_polygon(ClipPolygon(mesh.triangle(prim->primID)), int(dim), pos, below, above);
+  Box l = intersect(below.bounds(), box), r = intersect(above.bounds(), box);
+  // Embree expects both sides non-empty; a side rounding lost is the plane itself.
+  if (l.is_empty()) l = box, l.max[dim] = pos, l.min[dim] = std::min(l.min[dim], pos);
+  if (r.is_empty()) r = box, r.min[dim] = pos, r.max[dim] = std::max(r.max[dim], pos);
+  *left = RTCBounds{l.min.x, l.min.y, l.min.z, 0, l.max.x, l.max.y, l.max.z, 0};
+  *right = RTCBounds{r.min.x, r.min.y, r.min.z, 0, r.max.x, r.max.y, r.max.z, 0};
+}
+
+Tree convert_embree(const EmbreeNode* root) {
+  Tree t;
+  auto rec = [&](auto&& self, const EmbreeNode* e, uint32_t parent) -> uint32_t {
+    const uint32_t me = static_cast<uint32_t>(t.bvh.nodes.size());
+    t.bvh.nodes.emplace_back();
+    t.bvh.nodes[me].parent = parent;
+    if (e->leaf) {
+      const uint32_t r = static_cast<uint32_t>(t.refs.size());
+      t.refs.boxes.push_back(e->box);
+      t.refs.centroids.push_back(e->box.center());
+      t.refs.triangle_ids.push_back(e->prim);
+      t.bvh.nodes[me].make_leaf(static_cast<uint32_t>(t.bvh.ref_indices.size()), 1);
+      t.bvh.ref_indices.push_back(r);
+      return me;
+    }
+    const uint32_t l = self(self, e->children[0], me);
+    const uint32_t r = self(self, e->children[1], me);
+    t.bvh.nodes[me].make_inner(l, r);
+    return me;
+  };
+  t.bvh.root = rec(rec, root, kInvalidNode);
+  t.bvh.refit(t.refs);
+  return t;
+}
+
+Timing embree_high(RTCDevice device, const Mesh& mesh, const PrimitiveRefs& refs, double budget, const CostModel& cost,
+                   Tree* keep) {
+  const size_t capacity = std::max(refs.size(), size_t(budget * double(refs.size())));
+  std::vector<RTCBuildPrimitive> prims(capacity);
+  for (size_t k = 0; k < refs.size(); ++k) {
+    const Box& b = refs.boxes[k];
+    prims[k] = RTCBuildPrimitive{b.min.x, b.min.y, b.min.z, 0, b.max.x, b.max.y, b.max.z, refs.triangle_ids[k]};
+  }
+  EmbreeUser user{&mesh};
+  RTCBVH ebvh = rtcNewBVH(device);
+  RTCBuildArguments args = rtcDefaultBuildArguments();
+  args.byteSize = sizeof(args);
+  args.buildQuality = RTC_BUILD_QUALITY_HIGH;
+  args.maxBranchingFactor = 2;
+  args.maxLeafSize = 1;
+  args.traversalCost = float(cost.traversal);
+  args.intersectionCost = float(cost.intersection);
+  args.bvh = ebvh;
+  args.primitives = prims.data();
+  args.primitiveCount = refs.size();
+  args.primitiveArrayCapacity = capacity;
+  set_embree_callbacks(args);
+  args.splitPrimitive = embree_split;
+  args.userPtr = &user;
+  EmbreeNode* root = nullptr;
+  const Timing t = time_call([&] { root = static_cast<EmbreeNode*>(rtcBuildBVH(&args)); });
+  if (!root) {
+    rtcReleaseBVH(ebvh);
+    throw Error("embree: rtcBuildBVH failed");
+  }
+  if (keep) *keep = convert_embree(root);
+  rtcReleaseBVH(ebvh);
+  return t;
+}
+#endif
+
+std::string scene_name(const std::string& spec) { return std::filesystem::path(spec).stem().string(); }
+
+double ratio(double a, double b) { return b > 0.0 ? a / b : 0.0; }
+
+// ---- The default table.
+
+nlohmann::json run_scene(const Options& opt, const std::string& spec) {
+  const CostModel cost;
+  const Mesh mesh = load_scene(spec);
+  const PrimitiveRefs refs = make_references(mesh);
+  const std::string name = scene_name(spec);
+  const double tris = double(mesh.triangle_count());
+  SpatialSplitConfig config;
+  config.cost = cost;
+  config.budget = opt.budget;
+
+  ThreadLimit limit(opt.threads);
+  std::vector<double> ours_wall, ours_cpu, peer_wall, peer_cpu;
+  SpatialSplitResult ours;
+  Tree peer;
+  bool have_peer = false;
+#ifdef BVHOPT_HAVE_EMBREE
+  RTCDevice device = nullptr;
+  if (opt.embree) {
+    const std::string cfg = "threads=" + std::to_string(opt.threads);
+    device = rtcNewDevice(cfg.c_str());
+  }
+#endif
+  for (int run = -1; run < opt.runs; ++run) {  // run -1 warms up
+    const Timing t = time_call([&] { ours = build_spatial_split(mesh, refs, config); });
+    if (run >= 0) ours_wall.push_back(t.wall), ours_cpu.push_back(t.cpu);
+#ifdef BVHOPT_HAVE_EMBREE
+    if (device) {
+      const Timing p = embree_high(device, mesh, refs, opt.embree_budget, cost, run + 1 == opt.runs ? &peer : nullptr);
+      if (run >= 0) peer_wall.push_back(p.wall), peer_cpu.push_back(p.cpu);
+      have_peer = true;
+    }
+#endif
+  }
+#ifdef BVHOPT_HAVE_EMBREE
+  if (device) rtcReleaseDevice(device);
+#endif
+  const double cost_built = sah_cost(ours.bvh, ours.refs, cost);
+  const double ocost_built = optimal_collapse_cost(ours.bvh, ours.refs, cost);
+  InsertionConfig ic;
+  ic.cost = cost;
+  if (opt.opt_seconds > 0) ic.limits.time_limit = opt.opt_seconds;
+  const OptimizeReport rep = optimize_insertion(ours.bvh, ic);
+  const double cost_opt = sah_cost(ours.bvh, ours.refs, cost);
+  const double ocost_opt = optimal_collapse_cost(ours.bvh, ours.refs, cost);
+
+  const double wall = median(ours_wall), cpu = median(ours_cpu);
+  const double pwall = median(peer_wall), pcpu = median(peer_cpu);
+  const double peer_cost = have_peer ? sah_cost(peer.bvh, peer.refs, cost) : 0.0;
+  const double peer_ocost = have_peer ? optimal_collapse_cost(peer.bvh, peer.refs, cost) : 0.0;
+  const PeerFigures* best = peer_of(name);
+  std::printf("%-18s %8.0f %6.3f %6.3f %8.1f %8.1f %6.3f %6.2f %8.2f %8.2f %6.4f %8.2f %8.2f %6.4f %8.2f %8.2f %6.4f %6.1f\n",
+              name.c_str(), tris, ours.refs.size() / tris, have_peer ? peer.refs.size() / tris : 0.0, wall * 1e3,
+              pwall * 1e3, ratio(wall, pwall), ratio(cpu, pcpu), cost_built, peer_cost, ratio(cost_built, peer_cost),
+              cost_opt, best ? best->cost : 0.0, best ? ratio(cost_opt, best->cost) : 0.0, ocost_opt,
+              best ? best->ocost : 0.0, best ? ratio(ocost_opt, best->ocost) : 0.0, rep.seconds);
+  std::fflush(stdout);
+  return {{"scene", name},
+          {"triangles", mesh.triangle_count()},
+          {"threads", opt.threads},
+          {"refs_per_triangle", ours.refs.size() / tris},
+          {"spatial_splits", ours.stats.spatial_splits},
+          {"build_seconds", wall},
+          {"build_cpu_seconds", cpu},
+          {"refs_per_second", ours.refs.size() / wall},
+          {"cost", cost_built},
+          {"ocost", ocost_built},
+          {"optimized_cost", cost_opt},
+          {"optimized_ocost", ocost_opt},
+          {"optimize_seconds", rep.seconds},
+          {"embree_high",
+           {{"refs_per_triangle", have_peer ? peer.refs.size() / tris : 0.0},
+            {"build_seconds", pwall},
+            {"build_cpu_seconds", pcpu},
+            {"cost", peer_cost},
+            {"ocost", peer_ocost}}},
+          {"best_peer_cost", best ? best->cost : 0.0},
+          {"best_peer_ocost", best ? best->ocost : 0.0}};
+}
+
+// ---- --compare: edge volume subdivision beside spatial splits.
+
+struct Variant {
+  const char* name;
+  BuilderKind kind;
+  bool evh;
+};
+
+nlohmann::json compare_scene(const Options& opt, const std::string& spec, float angle) {
+  const CostModel cost;
+  Mesh mesh = load_scene(spec);
+  if (angle != 0.0f) rotate_mesh(mesh, Vec3(angle, angle, 0.0f));
+  const double tris = double(mesh.triangle_count());
+  const std::string name = scene_name(spec) + (angle != 0.0f ? " rot" : "");
+  ThreadLimit limit(opt.threads);
+  const Variant variants[] = {{"sweep", BuilderKind::sweep_sah, false},
+                              {"sweep+evh", BuilderKind::sweep_sah, true},
+                              {"sbvh", BuilderKind::spatial_split, false},
+                              {"sbvh+evh", BuilderKind::spatial_split, true}};
+  std::vector<Ray> rays[2];
+  nlohmann::json out = nlohmann::json::array();
+  for (const Variant& v : variants) {
+    BuildOptions bo;
+    bo.kind = v.kind;
+    bo.cost = cost;
+    bo.sbvh.budget = opt.budget;
+    BuiltTree tree;
+    std::vector<double> walls;
+    for (int run = 0; run < opt.runs; ++run)
+      walls.push_back(seconds_of([&] {
+        tree = build_tree(mesh, v.evh ? subdivide_edge_volume(mesh).refs : make_references(mesh), bo);
+      }));
+    const double built = sah_cost(tree.bvh, tree.refs, cost);
+    InsertionConfig ic;
+    ic.cost = cost;
+    ic.limits.time_limit = opt.opt_seconds > 0 ? opt.opt_seconds : 20.0;
+    const OptimizeReport rep = optimize_insertion(tree.bvh, ic);
+    const double optimized = sah_cost(tree.bvh, tree.refs, cost);
+    const FlatBvh flat = finalize(tree.bvh, tree.refs);
+    if (rays[0].empty()) {
+      const Tracer tracer(flat, mesh);
+      for (int k = 0; k < 2; ++k) {
+        RaySetConfig rc;
+        rc.kind = k == 0 ? RayKind::primary : RayKind::random;
+        rc.count = opt.rays;
+        rc.seed = 1;
+        rays[k] = make_ray_set(mesh, tracer, rc).rays;
+      }
+    }
+    WideTracerOptions wo;
+    wo.layout.collapse.width = 8;
+    const WideTracer wide(flat, mesh, wo);
+    double mrays[2];
+    for (int k = 0; k < 2; ++k) {
+      std::vector<double> rates;
+      for (int rep_i = 0; rep_i < 3; ++rep_i) {
+        const double c0 = process_cpu_seconds();
+        const RayMeasurement m = measure_rays(AnyTracer(wide), rays[k], RayQuery::closest, {.repeats = 1});
+        const double cpu = (process_cpu_seconds() - c0) / double(opt.threads);
+        rates.push_back(cpu > 0 ? double(m.rays) / cpu : m.rays_per_second);
+      }
+      mrays[k] = median(rates) * 1e-6;
+    }
+    std::printf("%-22s %-10s %7.3f %9.1f %9.2f %9.2f %8.1f %9.2f %9.2f\n", name.c_str(), v.name,
+                tree.refs.size() / tris, median(walls) * 1e3, built, optimized, rep.seconds, mrays[0], mrays[1]);
+    std::fflush(stdout);
+    out.push_back({{"scene", name},
+                   {"variant", v.name},
+                   {"refs_per_triangle", tree.refs.size() / tris},
+                   {"build_seconds", median(walls)},
+                   {"cost", built},
+                   {"optimized_cost", optimized},
+                   {"optimize_seconds", rep.seconds},
+                   {"primary_mrays", mrays[0]},
+                   {"random_mrays", mrays[1]}});
+  }
+  return out;
+}
+
+int run(int argc, char** argv) {
+  const Options opt = parse(argc, argv);
+  nlohmann::json all = nlohmann::json::array();
+  if (opt.compare) {
+    std::printf("sbvh_bench --compare: %d threads, budget %.2f, insertion %.0f s per tree, bvh8 layout, rays/s "
+                "= rays over process CPU time / threads (median of 3)\n",
+                opt.threads, opt.budget, opt.opt_seconds > 0 ? opt.opt_seconds : 20.0);
+    std::printf("%-22s %-10s %7s %9s %9s %9s %8s %9s %9s\n", "scene", "variant", "ref/tri", "build ms", "cost",
+                "opt cost", "opt s", "prim Mr/s", "rand Mr/s");
+    for (const std::string& spec : scene_specs(opt.scenes))
+      for (float angle : opt.rotations)
+        for (auto& row : compare_scene(opt, spec, angle)) all.push_back(row);
+  } else {
+    std::printf("sbvh_bench: %d threads, median of %d interleaved runs; budget ours %.2f, Embree HIGH %.2f; "
+                "c_T=3 c_I=2, leaves of one; costs count each triangle once per leaf\n",
+                opt.threads, opt.runs, opt.budget, opt.embree_budget);
+    std::printf("%-18s %8s %6s %6s %8s %8s %6s %6s %8s %8s %6s %8s %8s %6s %8s %8s %6s %6s\n", "scene", "tris",
+                "r/t", "r/t E", "ms", "ms E", "t/E", "cpu/E", "cost", "cost E", "c/E", "+ins", "best", "i/best",
+                "ocost", "best oc", "o/best", "ins s");
+    for (const std::string& spec : scene_specs(opt.scenes)) all.push_back(run_scene(opt, spec));
+  }
+  if (!opt.json_path.empty()) write_json(opt.json_path, all);
+  return 0;
+}
+
+}  // namespace
+}  // namespace bvhopt::bench
+
+int main(int argc, char** argv) { return bvhopt::bench::guarded_main("sbvh_bench", [&] { return bvhopt::bench::run(argc, argv); }); }

@@ -1,0 +1,682 @@
+#include "bvhopt/spatial_split_builder.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/task_group.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "builders/sah_common.h"
+#include "builders/sorted_range_sweep.h"
+#include "bvhopt/error.h"
+#include "bvhopt/triangle_clipping.h"
+
+namespace bvhopt {
+namespace {
+
+constexpr uint32_t kMaxBins = 128;
+constexpr size_t kBlock = 16384;  // references per block of a parallel pass (fixed: deterministic)
+
+// The builder's working reference: the box of the part of its triangle it stands for.
+struct SRef {
+  Box box;
+  uint32_t tri;
+};
+
+// What a node receives from its parent: its box and the bounds of its references' centres.
+struct NodeState {
+  Box box;
+  Box centres;
+};
+
+// A subtree: references in slots [begin, begin + count), room for `capacity` of them, and
+// nodes [base, base + 2 capacity - 1) to number its nodes in (as TopDownTree's NodeRange,
+// with the room for spatial splits' new references counted in).
+struct Task {
+  size_t begin, count, capacity;
+  uint32_t base, parent;
+  NodeState state;
+};
+
+float overlap_area(const Box& a, const Box& b) { return intersect(a, b).area(); }
+
+// A bin's box without a constructor, so that a node's bins cost only the n it uses (the
+// arrays hold room for kMaxBins; small nodes use a few).
+struct BinBox {
+  Vec3 min, max;
+  void clear() {
+    min = Vec3(std::numeric_limits<float>::infinity());
+    max = Vec3(-std::numeric_limits<float>::infinity());
+  }
+  void extend(const Box& b) {
+    min = bvhopt::min(min, b.min);
+    max = bvhopt::max(max, b.max);
+  }
+  void extend(const BinBox& b) {
+    min = bvhopt::min(min, b.min);
+    max = bvhopt::max(max, b.max);
+  }
+  Box box() const { return Box(min, max); }
+};
+
+// ---- Object split: centres binned per axis over the node's centre bounds.
+
+struct ObjectBins {
+  uint32_t n;
+  BinBox box[3][kMaxBins];
+  uint32_t count[3][kMaxBins];
+  explicit ObjectBins(uint32_t bins) { reset(bins); }
+  void reset(uint32_t bins) {
+    n = bins;
+    for (int a = 0; a < 3; ++a) {
+      std::fill(count[a], count[a] + n, 0u);
+      for (uint32_t b = 0; b < n; ++b) box[a][b].clear();
+    }
+  }
+  void merge(const ObjectBins& o) {
+    for (int a = 0; a < 3; ++a)
+      for (uint32_t b = 0; b < n; ++b) {
+        box[a][b].extend(o.box[a][b]);
+        count[a][b] += o.count[a][b];
+      }
+  }
+};
+
+struct ObjectMapping {
+  float origin[3], scale[3];
+  uint32_t last;
+  ObjectMapping(const Box& centres, uint32_t bins) : last(bins - 1) {
+    for (int a = 0; a < 3; ++a) {
+      origin[a] = centres.min[a];
+      const float extent = centres.max[a] - centres.min[a];
+      // Slightly under bins / extent so the largest centre lands in the last bin; a
+      // denormal extent would give an infinite scale: treated as flat.
+      const float s = extent > 0.0f ? float(bins) * 0.99999f / extent : 0.0f;
+      scale[a] = std::isfinite(s) ? s : 0.0f;
+    }
+  }
+  uint32_t bin(const Box& b, int a) const {
+    const int k = static_cast<int>((b.center()[a] - origin[a]) * scale[a]);
+    return static_cast<uint32_t>(std::clamp(k, 0, static_cast<int>(last)));
+  }
+};
+
+// ---- Spatial split: the node's box cut into equal slabs per axis.
+
+struct SpatialBins {
+  uint32_t n;
+  BinBox box[3][kMaxBins];
+  uint32_t enter[3][kMaxBins], exit[3][kMaxBins];
+  explicit SpatialBins(uint32_t bins) { reset(bins); }
+  void reset(uint32_t bins) {
+    n = bins;
+    for (int a = 0; a < 3; ++a) {
+      std::fill(enter[a], enter[a] + n, 0u);
+      std::fill(exit[a], exit[a] + n, 0u);
+      for (uint32_t b = 0; b < n; ++b) box[a][b].clear();
+    }
+  }
+  void merge(const SpatialBins& o) {
+    for (int a = 0; a < 3; ++a)
+      for (uint32_t b = 0; b < n; ++b) {
+        box[a][b].extend(o.box[a][b]);
+        enter[a][b] += o.enter[a][b];
+        exit[a][b] += o.exit[a][b];
+      }
+  }
+};
+
+// Bin boundaries as floats, so the binning and the partition compare against the very same
+// planes: boundary k (0..n) is min + k * width, and n is the box's max.
+struct SpatialMapping {
+  float min[3], width[3], max[3], inv[3];
+  uint32_t n;
+  SpatialMapping(const Box& box, uint32_t bins) : n(bins) {
+    for (int a = 0; a < 3; ++a) {
+      min[a] = box.min[a];
+      max[a] = box.max[a];
+      width[a] = (box.max[a] - box.min[a]) / float(bins);
+      const float i = width[a] > 0.0f ? 1.0f / width[a] : 0.0f;
+      inv[a] = std::isfinite(i) ? i : 0.0f;
+    }
+  }
+  bool usable(int a) const { return inv[a] > 0.0f; }
+  float plane(int a, uint32_t k) const { return k >= n ? max[a] : min[a] + float(k) * width[a]; }
+  uint32_t guess(int a, float x) const {
+    const int k = static_cast<int>((x - min[a]) * inv[a]);
+    return static_cast<uint32_t>(std::clamp(k, 0, static_cast<int>(n - 1)));
+  }
+  // The bin a box starting at x enters: the last k with plane(k) <= x.
+  uint32_t enter_bin(int a, float x) const {
+    uint32_t k = guess(a, x);
+    while (k > 0 && x < plane(a, k)) --k;
+    while (k + 1 < n && x >= plane(a, k + 1)) ++k;
+    return k;
+  }
+  // The bin a box ending at x leaves: the first k with x <= plane(k + 1).
+  uint32_t exit_bin(int a, float x) const {
+    uint32_t k = guess(a, x);
+    while (k > 0 && x <= plane(a, k)) --k;
+    while (k + 1 < n && x > plane(a, k + 1)) ++k;
+    return k;
+  }
+};
+
+struct Split {
+  enum Kind { none, object, spatial, halve, sweep } kind = none;
+  int axis = -1;
+  uint32_t bin = 0;  // first bin of the right side
+  float cost = std::numeric_limits<float>::infinity();
+  Box left, right;   // the bins' estimate of the children's boxes
+  uint32_t left_count = 0, right_count = 0;
+  std::vector<uint8_t> left_flag;  // sweep: per position in the node, 1 if it goes left
+};
+
+// Per side, what a partition pass found.
+struct Sides {
+  size_t left = 0, right = 0, cut = 0, unsplit = 0;
+  NodeState l, r;
+  void add(const Sides& o) {
+    left += o.left, right += o.right, cut += o.cut, unsplit += o.unsplit;
+    l.box.extend(o.l.box), l.centres.extend(o.l.centres);
+    r.box.extend(o.r.box), r.centres.extend(o.r.centres);
+  }
+};
+
+class SpatialSplitBuilder {
+ public:
+  SpatialSplitBuilder(const Mesh& mesh, const PrimitiveRefs& refs, const SpatialSplitConfig& config,
+                      SpatialSplitResult& out)
+      : mesh_(mesh), refs_(refs), config_(config), out_(out) {}
+
+  void run() {
+    const size_t n = refs_.size();
+    capacity_ = std::max(n, static_cast<size_t>(std::floor(config_.budget * double(mesh_.triangle_count()))));
+    detail::check_reference_count(capacity_, "spatial-split builder");
+    slots_.reset(new SRef[capacity_]);
+    NodeState root = tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, n, kBlock), NodeState{},
+        [&](const tbb::blocked_range<size_t>& r, NodeState acc) {
+          for (size_t i = r.begin(); i < r.end(); ++i) {
+            slots_[i] = SRef{refs_.boxes[i], refs_.triangle_ids[i]};
+            acc.box.extend(refs_.boxes[i]);
+            acc.centres.extend(refs_.boxes[i].center());
+          }
+          return acc;
+        },
+        [](NodeState a, const NodeState& b) {
+          a.box.extend(b.box);
+          a.centres.extend(b.centres);
+          return a;
+        });
+    root_area_ = root.box.area();
+    Bvh& bvh = out_.bvh;
+    bvh.nodes.assign(2 * capacity_ - 1, BvhNode{});
+    bvh.root = 0;
+    build(Task{0, n, capacity_, 0, kInvalidNode, root});
+    tasks_.wait();
+    compact();
+    SpatialSplitStats& s = out_.stats;
+    s.input_references = n;
+    s.references = out_.refs.size();
+    s.budget = capacity_;
+    s.spatial_splits = spatial_splits_.load();
+    s.object_splits = object_splits_.load();
+    s.split_references = cut_.load();
+    s.unsplit_references = unsplit_.load();
+  }
+
+ private:
+  // The loop of TopDownTree::build, over tasks that carry their room for new references.
+  void build(Task t) {
+    for (;;) {
+      BvhNode& node = out_.bvh.nodes[t.base];
+      node.parent = t.parent;
+      node.set_box(t.state.box);
+      Task l, r;
+      if (!split(t, node.area, l, r)) {
+        make_leaf(node, t);
+        return;
+      }
+      node.make_inner(l.base, r.base);
+      const bool left_smaller = l.count < r.count;
+      const Task small = left_smaller ? l : r;
+      if (t.count >= config_.parallel_threshold)
+        tasks_.run([this, small] { build(small); });
+      else
+        build(small);
+      t = left_smaller ? r : l;
+    }
+  }
+
+  // A leaf holds each triangle once: pieces of one triangle merge into one reference.
+  void make_leaf(BvhNode& node, const Task& t) {
+    SRef* s = slots_.get() + t.begin;
+    std::stable_sort(s, s + t.count, [](const SRef& a, const SRef& b) { return a.tri < b.tri; });
+    size_t kept = 0;
+    for (size_t i = 0; i < t.count; ++i) {
+      if (kept > 0 && s[kept - 1].tri == s[i].tri)
+        s[kept - 1].box.extend(s[i].box);
+      else
+        s[kept++] = s[i];
+    }
+    node.make_leaf(static_cast<uint32_t>(t.begin), static_cast<uint32_t>(kept));
+  }
+
+  uint32_t object_bin_count(size_t count) const {
+    const size_t bins = std::clamp<size_t>(count / 256, config_.object_bins, std::max<uint32_t>(config_.object_bins, kMaxBins));
+    return static_cast<uint32_t>(std::max<size_t>(2, std::min<size_t>(bins, 4 + count / 5)));
+  }
+
+  bool parallel(size_t count) const { return count >= config_.parallel_binning_threshold; }
+
+  // Runs body(begin, end) over the node's references, merging the results in a fixed
+  // order of fixed blocks (min, max and integer sums merge exactly anyway).
+  template <class Acc, class Body>
+  void reduce(const Task& t, Acc& acc, const Body& body) const {
+    if (!parallel(t.count)) {
+      body(acc, t.begin, t.begin + t.count);
+      return;
+    }
+    const Acc identity = acc;  // a local: tasks run here meanwhile may reuse `acc`'s storage
+    acc = tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(t.begin, t.begin + t.count, kBlock), identity,
+        [&](const tbb::blocked_range<size_t>& r, Acc acc) {
+          body(acc, r.begin(), r.end());
+          return acc;
+        },
+        [](Acc a, const Acc& b) {
+          a.merge(b);
+          return a;
+        });
+  }
+
+  // Small nodes: the exact sweep over the references sorted by centre on each axis (ties by
+  // position in the node, so the order is unique), as the sweep builder does.
+  Split find_sweep_split(const Task& t) const {
+    thread_local std::vector<uint32_t> order;
+    thread_local std::vector<float> key, suffix;
+    const size_t n = t.count;
+    order.resize(n);
+    key.resize(n);
+    suffix.resize(n);
+    const SRef* s = slots_.get() + t.begin;
+    auto sort_axis = [&](int a) {
+      for (size_t i = 0; i < n; ++i) {
+        order[i] = static_cast<uint32_t>(i);
+        key[i] = s[i].box.min[a] + s[i].box.max[a];
+      }
+      std::sort(order.begin(), order.end(),
+                [&](uint32_t x, uint32_t y) { return key[x] < key[y] || (key[x] == key[y] && x < y); });
+    };
+    detail::SweepCandidate best;
+    int best_axis = -1;
+    for (int a = 0; a < 3; ++a) {
+      sort_axis(a);
+      const detail::SweepCandidate c = detail::sweep_sorted_range(
+          n, [&](Box& b, size_t k) { b.extend(s[order[k]].box); }, [&](size_t k) -> float& { return suffix[k]; });
+      if (best_axis < 0 || detail::better_candidate(c, best)) best = c, best_axis = a;
+    }
+    Split split;
+    split.kind = Split::sweep;
+    split.axis = best_axis;
+    split.cost = best.cost;
+    split.left_count = static_cast<uint32_t>(best.left_count);
+    split.right_count = static_cast<uint32_t>(n - best.left_count);
+    sort_axis(best_axis);
+    split.left_flag.assign(n, 0);
+    for (size_t k = 0; k < n; ++k) {
+      const Box& b = s[order[k]].box;
+      if (k < best.left_count) {
+        split.left_flag[order[k]] = 1;
+        split.left.extend(b);
+      } else {
+        split.right.extend(b);
+      }
+    }
+    return split;
+  }
+
+  Split find_object_split(const Task& t) const {
+    if (t.count <= config_.exact_sweep_below) return find_sweep_split(t);
+    const uint32_t nb = object_bin_count(t.count);
+    const ObjectMapping m(t.state.centres, nb);
+    // 13 KB kept per thread rather than cleared whole at every node. A task oneTBB runs on
+    // this thread while it waits in reduce() may use them too, but reduce() assigns the
+    // result only after, and nothing here waits between that and the sweep.
+    thread_local std::unique_ptr<ObjectBins> storage;
+    if (!storage) storage.reset(new ObjectBins(nb));
+    ObjectBins& bins = *storage;
+    bins.reset(nb);
+    reduce(t, bins, [&](ObjectBins& acc, size_t b, size_t e) {
+      for (size_t i = b; i < e; ++i) {
+        const Box& box = slots_[i].box;
+        for (int a = 0; a < 3; ++a) {
+          const uint32_t k = m.bin(box, a);
+          acc.box[a][k].extend(box);
+          acc.count[a][k]++;
+        }
+      }
+    });
+    Split best;
+    best.kind = Split::object;
+    sweep_bins(nb, best, [&](int a, uint32_t k) { return bins.box[a][k].box(); },
+               [&](int a, uint32_t k) { return bins.count[a][k]; }, [&](int a, uint32_t k) { return bins.count[a][k]; },
+               std::numeric_limits<size_t>::max());
+    return best;
+  }
+
+  // The SAH sweep over bins, for both kinds: left of boundary k are the bins below it.
+  // `entering(a, k)` counts the references that start in bin k, `leaving(a, k)` those that
+  // end there (the same for object bins). Splits whose two sides hold more than `room`
+  // references are skipped. Ties go to the more balanced split, then the lower axis and bin.
+  template <class BoxOf, class Entering, class Leaving>
+  void sweep_bins(uint32_t nb, Split& best, const BoxOf& box_of, const Entering& entering, const Leaving& leaving,
+                  size_t room, const SpatialMapping* usable = nullptr) const {
+    float right_area[kMaxBins];
+    uint32_t right_count[kMaxBins];
+    uint32_t best_balance = std::numeric_limits<uint32_t>::max();
+    for (int a = 0; a < 3; ++a) {
+      if (usable && !usable->usable(a)) continue;
+      Box right;
+      uint32_t rc = 0;
+      for (uint32_t k = nb - 1; k > 0; --k) {
+        right.extend(box_of(a, k));
+        rc += leaving(a, k);
+        right_area[k] = right.area();
+        right_count[k] = rc;
+      }
+      Box left;
+      uint32_t lc = 0;
+      for (uint32_t k = 1; k < nb; ++k) {
+        left.extend(box_of(a, k - 1));
+        lc += entering(a, k - 1);
+        if (lc == 0 || right_count[k] == 0 || size_t(lc) + right_count[k] > room) continue;
+        const float c = left.area() * float(lc) + right_area[k] * float(right_count[k]);
+        const uint32_t balance = lc > right_count[k] ? lc - right_count[k] : right_count[k] - lc;
+        if (c < best.cost || (c == best.cost && balance < best_balance)) {
+          best.axis = a;
+          best.bin = k;
+          best.cost = c;
+          best.left_count = lc;
+          best.right_count = right_count[k];
+          best_balance = balance;
+        }
+      }
+    }
+    if (best.axis < 0) return;
+    best.left = best.right = Box();
+    for (uint32_t k = 0; k < nb; ++k) (k < best.bin ? best.left : best.right).extend(box_of(best.axis, k));
+  }
+
+  Triangle triangle(uint32_t tri) const { return mesh_.triangle(tri); }
+
+  // Adds a reference crossing bins [enter, exit] of axis a: the triangle is cut at each
+  // boundary in turn, and each slab's piece (its bounds within the reference's box) goes
+  // to its bin. The reference enters at its first non-empty piece and leaves at its last.
+  void bin_crossing(SpatialBins& bins, const SpatialMapping& m, int a, const SRef& r, uint32_t enter,
+                    uint32_t exit) const {
+    ClipPolygon poly[2] = {ClipPolygon(triangle(r.tri)), ClipPolygon()}, piece;
+    int rest = 0;
+    uint32_t first = kMaxBins, last = 0;
+    for (uint32_t k = enter; k <= exit; ++k) {
+      Box b;
+      if (k < exit) {
+        split_polygon(poly[rest], a, m.plane(a, k + 1), piece, poly[1 - rest]);
+        b = intersect(piece.bounds(), r.box);
+        rest = 1 - rest;
+      } else {
+        b = intersect(poly[rest].bounds(), r.box);
+      }
+      if (b.is_empty()) continue;
+      bins.box[a][k].extend(b);
+      first = std::min(first, k);
+      last = k;
+    }
+    if (first == kMaxBins) {  // rounding left no piece: count the reference whole
+      bins.box[a][enter].extend(r.box);
+      first = last = enter;
+    }
+    bins.enter[a][first]++;
+    bins.exit[a][last]++;
+  }
+
+  Split find_spatial_split(const Task& t) const {
+    const uint32_t nb = config_.spatial_bins;
+    const SpatialMapping m(t.state.box, nb);
+    thread_local std::unique_ptr<SpatialBins> storage;  // as find_object_split's
+    if (!storage) storage.reset(new SpatialBins(nb));
+    SpatialBins& bins = *storage;
+    bins.reset(nb);
+    reduce(t, bins, [&](SpatialBins& acc, size_t b, size_t e) {
+      for (size_t i = b; i < e; ++i) {
+        const SRef& r = slots_[i];
+        for (int a = 0; a < 3; ++a) {
+          if (!m.usable(a)) continue;
+          const uint32_t enter = m.enter_bin(a, r.box.min[a]);
+          const uint32_t exit = std::max(enter, m.exit_bin(a, r.box.max[a]));
+          if (enter == exit) {
+            acc.box[a][enter].extend(r.box);
+            acc.enter[a][enter]++;
+            acc.exit[a][exit]++;
+          } else {
+            bin_crossing(acc, m, a, r, enter, exit);
+          }
+        }
+      }
+    });
+    Split best;
+    best.kind = Split::spatial;
+    sweep_bins(nb, best, [&](int a, uint32_t k) { return bins.box[a][k].box(); },
+               [&](int a, uint32_t k) { return bins.enter[a][k]; }, [&](int a, uint32_t k) { return bins.exit[a][k]; },
+               t.capacity, &m);
+    return best;
+  }
+
+  // Chooses the node's split (false: make it a leaf) and partitions its references.
+  bool split(const Task& t, float node_area, Task& l, Task& r) {
+    if (t.count <= 1) return false;
+    Split object = find_object_split(t);
+    Split spatial;
+    const bool room = t.capacity > t.count;
+    if (room && (object.axis < 0 || overlap_area(object.left, object.right) > float(config_.alpha) * root_area_))
+      spatial = find_spatial_split(t);
+    const bool use_spatial = spatial.axis >= 0 && spatial.cost < object.cost;
+    if (use_spatial || object.axis >= 0) {
+      const Split& s = use_spatial ? spatial : object;
+      if (detail::sah_prefers_leaf(config_, node_area, t.count, s.cost)) return false;
+      if (use_spatial && partition(t, spatial, l, r)) return true;
+      if (object.axis >= 0) {
+        if (use_spatial && detail::sah_prefers_leaf(config_, node_area, t.count, object.cost)) return false;
+        partition(t, object, l, r);
+        return true;
+      }
+    }
+    // No plane separates the references (their centres coincide): halve them in slot order.
+    Split halve;
+    halve.kind = Split::halve;
+    halve.bin = static_cast<uint32_t>(t.count / 2);
+    const SRef* s = slots_.get() + t.begin;
+    for (size_t i = 0; i < t.count; ++i) (i < halve.bin ? halve.left : halve.right).extend(s[i].box);
+    halve.cost = halve.left.area() * float(halve.bin) + halve.right.area() * float(t.count - halve.bin);
+    if (detail::sah_prefers_leaf(config_, node_area, t.count, halve.cost)) return false;
+    partition(t, halve, l, r);
+    return true;
+  }
+
+  // Where a reference goes: bit 1 left (piece in `left`), bit 2 right (piece in `right`).
+  uint8_t classify(const Split& s, const SpatialMapping* m, const ObjectMapping* om, size_t index, const SRef& ref,
+                   SRef& left, SRef& right, Sides& sides) const {
+    switch (s.kind) {
+      case Split::halve:
+        left = right = ref;
+        return index < s.bin ? 1 : 2;
+      case Split::object:
+        left = right = ref;
+        return om->bin(ref.box, s.axis) < s.bin ? 1 : 2;
+      case Split::sweep:
+        left = right = ref;
+        return s.left_flag[index] ? 1 : 2;
+      default:
+        break;
+    }
+    const int a = s.axis;
+    left = right = ref;
+    const uint32_t enter = m->enter_bin(a, ref.box.min[a]);
+    const uint32_t exit = std::max(enter, m->exit_bin(a, ref.box.max[a]));
+    if (exit < s.bin) return 1;
+    if (enter >= s.bin) return 2;
+    const float plane = m->plane(a, s.bin);
+    ClipPolygon below, above;
+    split_polygon(ClipPolygon(triangle(ref.tri)), a, plane, below, above);
+    left.box = intersect(below.bounds(), ref.box);
+    right.box = intersect(above.bounds(), ref.box);
+    if (left.box.is_empty() && right.box.is_empty()) {
+      left.box = ref.box;  // rounding lost both pieces: keep the reference whole
+      return enter < s.bin ? 1 : 2;
+    }
+    if (left.box.is_empty()) return 2;
+    if (right.box.is_empty()) return 1;
+    // Unsplitting: the whole reference on one side, if that costs less than cutting it
+    // (each reference judged against the split's own boxes and counts, so the order in
+    // which they are judged does not matter).
+    const float nl = float(s.left_count), nr = float(s.right_count);
+    const float al = s.left.area(), ar = s.right.area();
+    const float c_split = al * nl + ar * nr;
+    const float c_left = merge(s.left, ref.box).area() * nl + ar * (nr - 1.0f);
+    const float c_right = al * (nl - 1.0f) + merge(s.right, ref.box).area() * nr;
+    if (c_left < c_split && c_left <= c_right) {
+      left.box = ref.box;
+      ++sides.unsplit;
+      return 1;
+    }
+    if (c_right < c_split) {
+      right.box = ref.box;
+      ++sides.unsplit;
+      return 2;
+    }
+    ++sides.cut;
+    return 3;
+  }
+
+  // Two passes over fixed blocks: each reference's pieces go to a scratch copy and each
+  // block counts its sides; then, with the children's room known, the pieces are written
+  // back, left ones from the node's first slot and right ones from the right child's.
+  // False (nothing changed) when a side would be empty or the node's room too small.
+  bool partition(const Task& t, const Split& s, Task& l, Task& r) {
+    const SpatialMapping m(t.state.box, config_.spatial_bins);
+    const ObjectMapping om(t.state.centres, object_bin_count(t.count));
+    const size_t blocks = (t.count + kBlock - 1) / kBlock;
+    std::vector<SRef> left(t.count), right(t.count);
+    std::vector<uint8_t> side(t.count);
+    std::vector<Sides> per_block(blocks);
+    auto classify_block = [&](size_t b) {
+      Sides& sides = per_block[b];
+      const size_t end = std::min(t.count, (b + 1) * kBlock);
+      for (size_t i = b * kBlock; i < end; ++i) {
+        side[i] = classify(s, &m, &om, i, slots_[t.begin + i], left[i], right[i], sides);
+        if (side[i] & 1) {
+          ++sides.left;
+          sides.l.box.extend(left[i].box);
+          sides.l.centres.extend(left[i].box.center());
+        }
+        if (side[i] & 2) {
+          ++sides.right;
+          sides.r.box.extend(right[i].box);
+          sides.r.centres.extend(right[i].box.center());
+        }
+      }
+    };
+    if (parallel(t.count))
+      tbb::parallel_for(size_t(0), blocks, classify_block);
+    else
+      for (size_t b = 0; b < blocks; ++b) classify_block(b);
+    Sides total;
+    std::vector<size_t> left_at(blocks), right_at(blocks);
+    for (size_t b = 0; b < blocks; ++b) {
+      left_at[b] = total.left;
+      right_at[b] = total.right;
+      total.add(per_block[b]);
+    }
+    if (total.left == 0 || total.right == 0 || total.left + total.right > t.capacity) return false;
+
+    // The spare room is shared by the children's counts: each keeps room in proportion.
+    const size_t spare = t.capacity - total.left - total.right;
+    const size_t left_room = total.left + spare * total.left / (total.left + total.right);
+    auto write_block = [&](size_t b) {
+      SRef* lo = slots_.get() + t.begin + left_at[b];
+      SRef* hi = slots_.get() + t.begin + left_room + right_at[b];
+      const size_t end = std::min(t.count, (b + 1) * kBlock);
+      for (size_t i = b * kBlock; i < end; ++i) {
+        if (side[i] & 1) *lo++ = left[i];
+        if (side[i] & 2) *hi++ = right[i];
+      }
+    };
+    if (parallel(t.count))
+      tbb::parallel_for(size_t(0), blocks, write_block);
+    else
+      for (size_t b = 0; b < blocks; ++b) write_block(b);
+
+    (s.kind == Split::spatial ? spatial_splits_ : object_splits_).fetch_add(1, std::memory_order_relaxed);
+    cut_.fetch_add(total.cut, std::memory_order_relaxed);
+    unsplit_.fetch_add(total.unsplit, std::memory_order_relaxed);
+    l = Task{t.begin, total.left, left_room, t.base + 1, t.base, total.l};
+    r = Task{t.begin + left_room, total.right, t.capacity - left_room, t.base + static_cast<uint32_t>(2 * left_room),
+             t.base, total.r};
+    return true;
+  }
+
+  // The slots the leaves use become the result's references, numbered depth-first; the
+  // unused nodes and slots are dropped; boxes are refitted to the final pieces (a node's
+  // pieces can be smaller than the box its parent measured before cutting them).
+  void compact() {
+    Bvh& bvh = out_.bvh;
+    bvh.ref_indices.resize(capacity_);
+    for (size_t i = 0; i < capacity_; ++i) bvh.ref_indices[i] = static_cast<uint32_t>(i);
+    bvh.renumber_depth_first();
+    PrimitiveRefs& refs = out_.refs;
+    refs.resize(bvh.ref_indices.size());
+    for (size_t i = 0; i < refs.size(); ++i) {
+      const SRef& s = slots_[bvh.ref_indices[i]];
+      refs.boxes[i] = s.box;
+      refs.centroids[i] = s.box.center();
+      refs.triangle_ids[i] = s.tri;
+      bvh.ref_indices[i] = static_cast<uint32_t>(i);
+    }
+    slots_.reset();
+    bvh.refit(refs);
+  }
+
+  const Mesh& mesh_;
+  const PrimitiveRefs& refs_;
+  const SpatialSplitConfig& config_;
+  SpatialSplitResult& out_;
+  size_t capacity_ = 0;
+  float root_area_ = 0.0f;
+  std::unique_ptr<SRef[]> slots_;
+  tbb::task_group tasks_;
+  std::atomic<size_t> spatial_splits_{0}, object_splits_{0}, cut_{0}, unsplit_{0};
+};
+
+}  // namespace
+
+SpatialSplitResult build_spatial_split(const Mesh& mesh, const PrimitiveRefs& refs, const SpatialSplitConfig& config) {
+  validate(config);
+  SpatialSplitResult result;
+  if (refs.empty()) return result;
+  const size_t triangles = mesh.triangle_count();
+  for (size_t i = 0; i < refs.size(); ++i)
+    if (refs.triangle_ids[i] >= triangles)
+      throw Error("spatial-split builder: reference " + std::to_string(i) + " names triangle " +
+                  std::to_string(refs.triangle_ids[i]) + ", but the mesh has " + std::to_string(triangles));
+  SpatialSplitBuilder(mesh, refs, config, result).run();
+  return result;
+}
+
+}  // namespace bvhopt
