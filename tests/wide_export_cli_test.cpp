@@ -75,7 +75,7 @@ class WideExportCli : public bvhopt::testing::ProgramTest {
   fs::path reader_;
 };
 
-constexpr const char* kScene = "builtin?triangles=3000";
+constexpr const char* kScene = "builtin?triangles=4000";
 
 TEST_F(WideExportCli, ReaderTracesFlatBvh8LikeBvhopt) {
   trace_sets(kScene, "--leaf-size 4", "bvh8");

@@ -240,7 +240,7 @@ class SpatialSplitBuilder {
       node.parent = t.parent;
       node.set_box(t.state.box);
       Task l, r;
-      if (!split(t, node.area, l, r)) {
+      if (!split(t, node.area(), l, r)) {
         make_leaf(node, t);
         return;
       }
@@ -480,7 +480,7 @@ class SpatialSplitBuilder {
   }
 
   // Chooses the node's split (false: make it a leaf) and partitions its references.
-  bool split(const Task& t, float node_area, Task& l, Task& r) {
+  bool split(const Task& t, double node_area, Task& l, Task& r) {
     if (t.count <= 1) return false;
     Split object = find_object_split(t);
     Split spatial;

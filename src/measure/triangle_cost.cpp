@@ -56,26 +56,26 @@ std::vector<uint64_t> subtree_triangle_counts(const Bvh& bvh, const PrimitiveRef
 double sah_cost(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& model) {
   if (bvh.empty()) return 0.0;
   const std::vector<uint64_t> triangles = subtree_triangle_counts(bvh, refs);
+  // The weights sah_cost uses (areas, or the formula's limit for a zero-area root).
+  const CostWeights w(bvh);
   std::vector<double> cost(bvh.nodes.size(), 0.0);
-  double leaf_triangles = 0.0;
   for (uint32_t n : bvh.post_order()) {
     const BvhNode& nd = bvh[n];
-    if (nd.is_leaf()) leaf_triangles += static_cast<double>(triangles[n]);
-    cost[n] = nd.is_leaf() ? leaf_cost(nd.area, static_cast<uint32_t>(triangles[n]), model)
-                           : model.traversal * nd.area + cost[nd.left()] + cost[nd.right()];
+    cost[n] = nd.is_leaf() ? leaf_cost(w(nd), static_cast<uint32_t>(triangles[n]), model)
+                           : model.traversal * w(nd) + cost[nd.left()] + cost[nd.right()];
   }
-  const double root_area = bvh[bvh.root].area;
-  // A zero-area root: the limit of the formula as the box shrinks uniformly (as sah_cost).
-  if (!(root_area > 0.0)) return model.intersection * leaf_triangles;
-  return cost[bvh.root] / root_area;
+  const double c = cost[bvh.root] / w.root();
+  check_finite_cost(c, "cost");
+  return c;
 }
 
 double optimal_collapse_cost(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& model,
                              uint32_t max_leaf_size) {
   if (bvh.empty()) return 0.0;
-  const double root_area = bvh[bvh.root].area;
-  if (!(root_area > 0.0)) return sah_cost(bvh, refs, model);
-  return collapse_costs(bvh, model, max_leaf_size, subtree_triangle_counts(bvh, refs)).best[bvh.root] / root_area;
+  const double c =
+      collapse_costs(bvh, model, max_leaf_size, subtree_triangle_counts(bvh, refs)).best[bvh.root] / CostWeights(bvh).root();
+  check_finite_cost(c, "ocost");
+  return c;
 }
 
 TreeStats compute_stats(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& model) {
