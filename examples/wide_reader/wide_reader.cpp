@@ -128,11 +128,21 @@ constexpr float kExitScale = 1.0f + 2.0f * (3.0f * 0x1p-24f / (1.0f - 3.0f * 0x1
 struct RayData {
   Ray ray;
   float rdir[3];
+  // The triangle test runs on dir * t_scale, a power of two bringing the largest component
+  // to [0.5, 1) (exact; its determinant would otherwise be a cube of the scene's scale).
+  float sdir[3];
+  float t_scale;
 };
 
 RayData prepare(const Ray& ray) {
-  RayData r{ray, {}};
+  RayData r{ray, {}, {}, 1.0f};
   const float biggest = std::max(std::fabs(ray.dir[0]), std::max(std::fabs(ray.dir[1]), std::fabs(ray.dir[2])));
+  if (biggest > 0.0f && std::isfinite(biggest)) {
+    int e = 0;
+    std::frexp(biggest, &e);
+    r.t_scale = std::ldexp(1.0f, -std::clamp(e, -126, 127));
+  }
+  for (int a = 0; a < 3; ++a) r.sdir[a] = ray.dir[a] * r.t_scale;
   for (int a = 0; a < 3; ++a) {
     float c = ray.dir[a];
     // A zero component becomes tiny (sign kept): finite inverse, no 0 * inf.
@@ -163,7 +173,7 @@ struct Best {
 // Moller-Trumbore in the operation order the format documents (its reference test), so it
 // rounds exactly as bvhopt's tracer; t must lie in [tmin, best.t], ties go to the lower id.
 bool triangle(const RayData& r, const float v0[3], const float e1[3], const float e2[3], uint32_t id, Best& best) {
-  const float* d = r.ray.dir;
+  const float* d = r.sdir;
   const float p[3] = {d[1] * e2[2] - d[2] * e2[1], d[2] * e2[0] - d[0] * e2[2], d[0] * e2[1] - d[1] * e2[0]};
   const float det = e1[0] * p[0] + e1[1] * p[1] + e1[2] * p[2];
   const float adet = std::fabs(det);
@@ -172,11 +182,12 @@ bool triangle(const RayData& r, const float v0[3], const float e1[3], const floa
   float uu = s[0] * p[0] + s[1] * p[1] + s[2] * p[2];
   const float q[3] = {s[1] * e1[2] - s[2] * e1[1], s[2] * e1[0] - s[0] * e1[2], s[0] * e1[1] - s[1] * e1[0]};
   float vv = d[0] * q[0] + d[1] * q[1] + d[2] * q[2];
-  float tt = e2[0] * q[0] + e2[1] * q[1] + e2[2] * q[2];
-  if (flip) uu = -uu, vv = -vv, tt = -tt;
+  if (flip) uu = -uu, vv = -vv;
   if (!(det != 0.0f && uu >= 0.0f && vv >= 0.0f && uu + vv <= adet)) return false;
   const float inv = 1.0f / adet;
-  const float t = tt * inv;
+  // e2 . (q / det), not (e2 . q) / det, which overflows a float for large scenes.
+  const float sinv = flip ? -inv : inv;
+  const float t = (e2[0] * (q[0] * sinv) + e2[1] * (q[1] * sinv) + e2[2] * (q[2] * sinv)) * r.t_scale;
   if (!(t >= r.ray.tmin && t <= best.t)) return false;
   if (t < best.t || id < best.id) best = {t, uu * inv, vv * inv, id};
   return true;

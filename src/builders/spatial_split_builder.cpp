@@ -198,7 +198,7 @@ class SpatialSplitBuilder {
   void run() {
     const size_t n = refs_.size();
     capacity_ = std::max(n, static_cast<size_t>(std::floor(config_.budget * double(mesh_.triangle_count()))));
-    detail::check_reference_count(capacity_, "spatial-split builder");
+    check_reference_count(capacity_, "spatial-split builder");
     slots_.reset(new SRef[capacity_]);
     NodeState root = tbb::parallel_reduce(
         tbb::blocked_range<size_t>(0, n, kBlock), NodeState{},
