@@ -42,14 +42,7 @@ uint8_t quantize_up(float origin, float scale, float hi) {
   return uint8_t(q);
 }
 
-Box triangle_box(const Mesh& mesh, uint32_t id) {
-  const Triangle t = mesh.triangle(id);
-  Box b;
-  b.extend(t.v0);
-  b.extend(t.v1);
-  b.extend(t.v2);
-  return b;
-}
+Box triangle_box(const Mesh& mesh, uint32_t id) { return mesh.triangle(id).bounds(); }
 
 Box intersect(const Box& a, const Box& b) { return Box(max(a.min, b.min), min(a.max, b.max)); }
 
