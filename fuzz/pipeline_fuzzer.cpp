@@ -1,16 +1,23 @@
 // Structure-aware: the bytes describe a small triangle soup (shared and repeated vertices,
-// degenerate triangles, one scale exponent for the whole soup) and a few rays. Every
-// builder's tree must validate, every optimizer (a few passes) must leave a valid tree with
-// a finite cost no higher than it started (hill climbing) or than the best it saw, and
+// degenerate triangles, one power-of-two scale for the whole soup), which builder makes its
+// tree (any of them, the SBVH too, over the triangles or over their edge volume pieces) and
+// a few rays. The tree must validate; every optimizer (a few passes) must leave a valid
+// tree with a finite cost no higher than it started (hill climbing, annealing's best) and
+// equal to the cost recomputed from scratch; compaction must lower no cost it cannot; and
 // traversal must agree with brute force on every ray.
 #include <fuzzer/FuzzedDataProvider.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 
 #include "bvhopt/build.h"
+#include "bvhopt/collapse_leaves.h"
+#include "bvhopt/edge_volume_subdivision.h"
+#include "bvhopt/leaf_dedup.h"
+#include "bvhopt/triangle_cost.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/finalize.h"
 #include "bvhopt/insertion_optimizer.h"
@@ -23,9 +30,13 @@
 namespace bvhopt {
 namespace {
 
-// Scale exponents of two, either side of 1. Wider scales (to the float limits, 2^±126) give
-// non-finite SAH costs today (issue 14, item 3); widen this once areas are summed in double.
-constexpr int kMaxScaleExponent = 40;
+// Scale exponents of two, either side of 1: trees and costs over nearly the whole float
+// range (coordinates up to 4 * 2^120, so box extents stay finite floats; areas and costs are
+// double). Rays only up to 2^+-40: the float triangle tests square edge lengths, and a
+// fuzzed soup's shortest edges (fractions down to about 2^-32 of the scale) leave the
+// normal floats below that.
+constexpr int kMaxScaleExponent = 120;
+constexpr int kMaxRayScaleExponent = 40;
 constexpr int kMaxTriangles = 48;
 constexpr int kRays = 16;
 
@@ -66,51 +77,68 @@ void check_tree(const Bvh& bvh, const PrimitiveRefs& refs, const std::string& wh
   if (!std::isfinite(cost)) fail(what + ": non-finite cost " + std::to_string(cost));
 }
 
-// Insertion reports NaN on a zero-area root where the other optimizers report the formula's
-// value (issue 14, item 10, fixed separately); drop this allowance with that fix.
-bool known_zero_area_nan(const Bvh& bvh, const std::string& what) {
-  return what.find("insertion") != std::string::npos && !(bvh.nodes[bvh.root].area() > 0.0f);
-}
-
-void check_report(const OptimizeReport& report, const std::string& what, bool never_worse) {
+// The report's final cost is the tree's: an optimizer that tracks its cost incrementally
+// must end where a fresh sum over the tree ends (up to rounding of the running sum).
+void check_report(const OptimizeReport& report, const Bvh& bvh, const std::string& what, bool never_worse) {
   if (!std::isfinite(report.initial_cost) || !std::isfinite(report.final_cost))
     fail(what + ": non-finite cost in the report");
   if (never_worse && report.final_cost > report.initial_cost)
     fail(what + ": cost rose from " + std::to_string(report.initial_cost) + " to " + std::to_string(report.final_cost));
+  const double fresh = sah_cost(bvh);
+  if (std::fabs(fresh - report.final_cost) > 1e-9 * std::max(1.0, fresh))
+    fail(what + ": reported cost " + std::to_string(report.final_cost) + " but the tree costs " + std::to_string(fresh));
 }
 
-void optimize_all(const Bvh& built, const PrimitiveRefs& refs, uint64_t seed, const std::string& what) {
+// Compaction over the optimized tree: never above the cost it started from, exactly the
+// optimal collapse's cost, and a tree that still validates (each leaf keeps one reference
+// per triangle; a reference dropped as a duplicate is allowed).
+Bvh compact(Bvh bvh, const PrimitiveRefs& refs, const std::string& what) {
+  const std::string name = what + " compaction";
+  const double optimum = optimal_collapse_cost(bvh, refs);
+  const CollapseResult result = collapse_leaves(bvh, refs);
+  if (!std::isfinite(result.cost_after) || result.cost_after > result.cost_before * (1.0 + 1e-12))
+    fail(name + ": cost " + std::to_string(result.cost_before) + " -> " + std::to_string(result.cost_after));
+  const double fresh = sah_cost(bvh, refs);
+  if (std::fabs(fresh - result.cost_after) > 1e-9 * std::max(1.0, fresh) ||
+      std::fabs(optimum - result.cost_after) > 1e-9 * std::max(1.0, optimum))
+    fail(name + ": reported " + std::to_string(result.cost_after) + ", tree " + std::to_string(fresh) +
+         ", optimal collapse " + std::to_string(optimum));
+  const ValidationReport report = validate_deduplicated(bvh, refs);
+  if (!report.ok()) fail(name + ": invalid tree: " + report.summary());
+  return bvh;
+}
+
+// One optimizer per input (hill climbing, annealing or an insertion form), then compaction
+// of its result; returns the compacted tree, for tracing.
+Bvh optimize_and_compact(const Bvh& built, const PrimitiveRefs& refs, uint32_t which, uint64_t seed,
+                         const std::string& what) {
   OptimizeLimits limits;
   limits.max_passes = 4;
-  {
-    Bvh bvh = built;
+  Bvh bvh = built;
+  std::string name;
+  if (which == 0) {
     HillClimbConfig config;
     config.limits = limits;
-    check_report(hill_climb(bvh, config), what + " hill-climb", true);
-    check_tree(bvh, refs, what + " hill-climb");
-  }
-  {
-    Bvh bvh = built;
+    name = what + " hill-climb";
+    check_report(hill_climb(bvh, config), bvh, name, true);
+  } else if (which == 1) {
     AnnealConfig config;
     config.limits = limits;
     config.schedule_passes = 3;
     config.period = 2;
     config.seed = seed;
-    check_report(anneal(bvh, config), what + " anneal", true);  // keep_best: never above the start
-    check_tree(bvh, refs, what + " anneal");
-  }
-  for (InsertionForm form : insertion_forms()) {
-    Bvh bvh = built;
+    name = what + " anneal";
+    check_report(anneal(bvh, config), bvh, name, true);  // keep_best: never above the start
+  } else {
     InsertionConfig config;
     config.limits = limits;
-    config.form = form;
+    config.form = insertion_forms()[which - 2];
     config.seed = seed;
-    const std::string name = what + " insertion " + std::string(form_name(form));
-    const OptimizeReport report = optimize_insertion(bvh, config);
-    if (known_zero_area_nan(built, name)) continue;
-    check_report(report, name, false);
-    check_tree(bvh, refs, name);
+    name = what + " insertion " + std::string(form_name(config.form));
+    check_report(optimize_insertion(bvh, config), bvh, name, false);
   }
+  check_tree(bvh, refs, name);
+  return compact(bvh, refs, name);
 }
 
 void trace_against_brute_force(const Mesh& mesh, const Bvh& bvh, const PrimitiveRefs& refs,
@@ -139,23 +167,34 @@ void trace_against_brute_force(const Mesh& mesh, const Bvh& bvh, const Primitive
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace bvhopt;
   FuzzedDataProvider in(data, size);
-  const float scale = std::ldexp(1.0f, in.ConsumeIntegralInRange<int>(-kMaxScaleExponent, kMaxScaleExponent));
+  const int exponent = in.ConsumeIntegralInRange<int>(-kMaxScaleExponent, kMaxScaleExponent);
+  const float scale = std::ldexp(1.0f, exponent);
+  // One builder and one optimizer per input keep an execution short; the fuzzer's mutations
+  // reach every pair.
+  const std::vector<BuilderKind> builders = all_mesh_builders();
+  const BuilderKind kind = builders[in.ConsumeIntegralInRange<size_t>(0, builders.size() - 1)];
+  const bool edge_volume = in.ConsumeBool();
   const uint32_t leaf_size = in.ConsumeIntegralInRange<uint32_t>(1, 4);
+  const uint32_t optimizer = in.ConsumeIntegralInRange<uint32_t>(0, 1 + uint32_t(insertion_forms().size()));
   const uint64_t seed = in.ConsumeIntegral<uint8_t>();
   const Mesh mesh = triangle_soup(in, scale);
-  const PrimitiveRefs refs = make_references(mesh);
-  const size_t rays_at = in.remaining_bytes();
-  for (BuilderKind kind : all_builders()) {
-    BuildOptions options;
-    options.kind = kind;
-    options.leaf.max_leaf_size = leaf_size;
-    const std::string what(builder_name(kind));
-    const Bvh bvh = build_bvh(refs, options);
-    check_tree(bvh, refs, what);
-    optimize_all(bvh, refs, seed, what);
-    // Every builder sees the same rays: the provider's remaining bytes, read afresh.
-    FuzzedDataProvider rays(data + size - rays_at, rays_at);
-    trace_against_brute_force(mesh, bvh, refs, rays, scale, what);
+
+  EdgeVolumeConfig evh;
+  evh.t = 6;  // small soups: a few pieces per fat triangle, not thousands
+  const PrimitiveRefs refs = edge_volume ? subdivide_edge_volume(mesh, evh).refs : make_references(mesh);
+  BuildOptions options;
+  options.kind = kind;
+  options.leaf.max_leaf_size = leaf_size;
+  const std::string what = std::string(builder_name(kind)) + (edge_volume ? " + evh" : "");
+  const BuiltTree built = build_tree(mesh, refs, options);
+  check_tree(built.bvh, built.refs, what);
+  const Bvh compacted = optimize_and_compact(built.bvh, built.refs, optimizer, seed, what);
+  if (std::abs(exponent) <= kMaxRayScaleExponent) {
+    // Both trees see the same rays: the provider's remaining bytes, read afresh.
+    const size_t rays_at = in.remaining_bytes();
+    FuzzedDataProvider rays(data + size - rays_at, rays_at), again(data + size - rays_at, rays_at);
+    trace_against_brute_force(mesh, built.bvh, built.refs, rays, scale, what);
+    trace_against_brute_force(mesh, compacted, built.refs, again, scale, what + " optimized and compacted");
   }
   return 0;
 }

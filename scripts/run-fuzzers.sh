@@ -20,6 +20,9 @@ corpus=$build/corpus
 findings=$build/findings
 mkdir -p "$corpus" "$findings"
 ./$build/fuzz/fuzz_seed_corpus "$corpus"
+# Each input is written to a temporary file (the readers take paths): in memory, where the
+# machine has it, that is about four times the executions of a disk-backed /tmp.
+if [ -z "${TMPDIR:-}" ] && [ -d /dev/shm ] && [ -w /dev/shm ]; then export TMPDIR=/dev/shm; fi
 export LSAN_OPTIONS="suppressions=$PWD/fuzz/lsan.supp${LSAN_OPTIONS:+:$LSAN_OPTIONS}"
 export ASAN_OPTIONS="suppressions=$PWD/fuzz/asan.supp${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
 export UBSAN_OPTIONS="print_stacktrace=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}"
