@@ -236,6 +236,23 @@ TEST_F(BadInput, PlyAsciiElementsFillTheirLineExactly) {
             2u);
 }
 
+// Found by the long fuzz run (fuzz/scene_file_fuzzer): a NUL byte inside a vertex line ends
+// assimp's reading of that line, so it read another layout than the one checked and aborted
+// the program on an assertion in its triangulation. Control bytes other than tab and CR are
+// refused in ASCII data.
+TEST_F(BadInput, PlyAsciiLinesHoldNoControlBytes) {
+  const std::string header =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 2\nproperty list uchar int vertex_indices\nend_header\n";
+  expect_rejected(write("nul_line.ply", header + "0 0 0\n1 0 0\n0 1 0\n1 1 1" + std::string(1, '\0') + "OOOO\n3 0 1 2\n3 1 2 3\n"),
+                  {"vertex 3: control byte 0 in an ASCII line"});
+  expect_rejected(write("escape_line.ply", header + "0 0 0\n1 0 0\n0 1 0\n1 1 1\n3 0 1\x1b 2\n3 1 2 3\n"),
+                  {"face 0: control byte 27 in an ASCII line"});
+  EXPECT_EQ(load_mesh_file(write("tabs_and_crlf.ply", header + "0\t0 0\r\n1 0 0\r\n0 1 0\n1 1 1\n3 0 1 2\n3 1 2 3\n"))
+                .triangle_count(),
+            2u);
+}
+
 // Messages show the file's text with control bytes escaped, and a negative count as
 // written, not as 2^64 minus it.
 TEST_F(BadInput, PlyMessagesShowNoRawBytesAndNoWrappedCounts) {

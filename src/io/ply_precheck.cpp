@@ -104,7 +104,10 @@ PlyHeader read_ply_header(std::istream& in, const std::string& where) {
 // Assimp fills the faces of a short ASCII file with whatever it finds, and reads one
 // element per line: a line with more or fewer values than the header's properties shifts
 // its reading against this walk (found by fuzz/scene_file_fuzzer: an assertion aborted the
-// program). So each element is walked on its own line, and must fill it exactly.
+// program). So each element is walked on its own line, and must fill it exactly. A control
+// byte (a NUL above all) ends assimp's reading of a line where this walk goes on: it is
+// refused too (found by fuzz/scene_file_fuzzer: a NUL inside a vertex line aborted the
+// program in assimp's triangulation).
 void check_ascii_ply(const std::vector<char>& data, const PlyHeader& h, const std::string& where) {
   const uint64_t vertex_count = h.vertex_count();
   size_t at = 0, line_end = 0;
@@ -133,6 +136,12 @@ void check_ascii_ply(const std::vector<char>& data, const PlyHeader& h, const st
     for (uint64_t i = 0; i < e.count; ++i) {
       line_end = at;
       while (line_end < data.size() && data[line_end] != '\n') ++line_end;
+      for (size_t c = at; c < line_end; ++c) {
+        const auto byte = static_cast<unsigned char>(data[c]);
+        if (byte < 0x20 && byte != '\t' && byte != '\r')
+          throw Error(where + ": " + e.name + " " + std::to_string(i) + ": control byte " + std::to_string(byte) +
+                      " in an ASCII line");
+      }
       for (const PlyProperty& prop : e.properties) {
         if (!next_token(token)) throw short_by(i);
         if (!prop.count_size) continue;

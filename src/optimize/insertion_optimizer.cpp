@@ -197,9 +197,18 @@ class InsertionOptimizer {
   // Leaves in keys_ the keys of (at least) the k largest: a histogram of the keys' top 16
   // bits finds the bucket that holds the k-th, and only keys from that bucket up are kept,
   // so the scratch is about k keys, not one per node (8 bytes a node on a huge tree).
+  // A tree with fewer nodes than buckets keeps every key instead: the histogram's fixed
+  // 2^16 steps would be most of a pass there (a few hundred nodes), and its keys fit in
+  // less scratch than the histogram.
   void collect_largest_keys(size_t k) {
     constexpr size_t kBuckets = size_t{1} << 16;
     const size_t count = bvh_.nodes.size();
+    if (count <= kBuckets) {
+      keys_.clear();
+      for (size_t i = 0; i < count; ++i)
+        if (!bvh_.nodes[i].is_leaf()) keys_.push_back(key(static_cast<uint32_t>(i)));
+      return;
+    }
     auto bucket = [](uint64_t key) { return static_cast<size_t>(key >> 48); };
     tbb::combinable<std::vector<uint32_t>> local([] { return std::vector<uint32_t>(kBuckets, 0); });
     tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 16384), [&](const tbb::blocked_range<size_t>& r) {
