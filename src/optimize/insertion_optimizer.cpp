@@ -118,8 +118,9 @@ class InsertionOptimizer {
     if (parallel_) {
       moves = pass_parallel(candidates_);
     } else {
-      for (uint32_t n : candidates_) {
-        moves += update_sequential(n);
+      for (size_t i = 0; i < candidates_.size(); ++i) {
+        prefetch_ahead(i);
+        moves += update_sequential(candidates_[i]);
         if (undo_.size() >= undo_limit() && !stay_within_log()) break;
       }
     }
@@ -154,6 +155,20 @@ class InsertionOptimizer {
     undo_.restore(bvh_, inner_area_);
     notify_move();
     return false;
+  }
+
+  // Each update starts with misses on its candidate, the candidate's children and parent:
+  // asked for a few updates ahead (the node first, its neighbours once it has arrived).
+  void prefetch_ahead(size_t i) const {
+    constexpr size_t kNodeAhead = 8, kLinksAhead = 4;
+    const BvhNode* nodes = bvh_.nodes.data();
+    if (i + kNodeAhead < candidates_.size()) detail::prefetch_node(nodes, candidates_[i + kNodeAhead]);
+    if (i + kLinksAhead < candidates_.size()) {
+      const BvhNode& c = nodes[candidates_[i + kLinksAhead]];
+      if (c.is_leaf()) return;
+      detail::prefetch_children(nodes, c);
+      if (c.parent != kInvalidNode) detail::prefetch_node(nodes, c.parent);
+    }
   }
 
   // Candidates of one pass: the k inner non-root nodes with the largest measure, largest
@@ -248,16 +263,27 @@ class InsertionOptimizer {
     remove(n);
     // Both searches start from N's sibling, which took P's place: the children's old
     // neighbourhood, usually close to their best place, so the bound prunes from the start.
-    insert(a, search_from(a, s), n);
+    // S's ancestors are walked once (a chain of cache misses); the first insertion can only
+    // add its new node to that chain.
+    path_.clear();
+    for (uint32_t x = bvh_[s].parent; x != kInvalidNode; x = bvh_[x].parent) path_.push_back(x);
+    const uint32_t xa = search_from(a, s);
+    insert(a, xa, n);
+    if (xa == s) {
+      path_.insert(path_.begin(), n);
+    } else if (auto at = std::find(path_.begin(), path_.end(), xa); at != path_.end()) {
+      path_.insert(at + 1, n);
+    }
     insert(b, search_from(b, s), p);
     notify_move();
     return 1;
   }
 
-  // The best place for subtree m (out of the tree) by the full search, seeded with `start`.
+  // The best place for subtree m (out of the tree) by the full search, seeded with `start`,
+  // whose ancestors are path_.
   uint32_t search_from(uint32_t m, uint32_t start) {
     const Box& box = bvh_[m].box;
-    const ReinsertionCandidate seed{start, detail::placement_cost(bvh_, box, start, path_)};
+    const ReinsertionCandidate seed{start, detail::placement_cost_along(bvh_, box, start, path_)};
     return detail::search_reinsertion(bvh_, box, kInvalidNode, kInvalidNode, heap_, seed).node;
   }
 
