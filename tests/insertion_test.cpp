@@ -2,7 +2,6 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -14,7 +13,6 @@
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/validate.h"
-#include "optimize/area_ceiling.h"
 #include "optimize/reinsertion_search.h"
 #include "optimize/undo_log.h"
 #include "test_support.h"
@@ -147,40 +145,6 @@ TEST(InsertionSearch, SearchFromAnyStartEqualsBruteForce) {
 }
 
 // The undo log gives back exactly the tree of its restore point, whatever was changed after.
-// The bound holds for boxes from a point to the float range, in a tree of any scale, is the
-// least float that holds, and scales exactly with the scene.
-TEST(AreaCeilings, LeastFloatAboveEveryAreaAtEveryScale) {
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
-  for (int e : {-126, -60, -20, 0, 20, 60, 126}) {
-    const float s = std::ldexp(1.0f, e);
-    BvhNode root;
-    root.set_box(Box({-s, -s, -s}, {s, s, s}));
-    const detail::AreaCeilings c(root.area());
-    const detail::AreaCeilings c2(4.0 * root.area());  // the same tree scaled by 2
-    for (int i = 0; i < 2000; ++i) {
-      BvhNode n;
-      const float w = std::ldexp(unit(rng), -static_cast<int>(rng() % 40));
-      n.set_box(Box({0, 0, 0}, {w * s, unit(rng) * s, (i % 7 == 0 ? 0.0f : unit(rng)) * s}));
-      const uint32_t bits = c.ceiling(n);
-      n.spare = bits;
-      ASSERT_GE(c.bound(n), n.area()) << e << " " << i;
-      if (bits != 0) {
-        BvhNode below = n;
-        below.spare = std::bit_cast<uint32_t>(std::nextafter(std::bit_cast<float>(bits), 0.0f));
-        ASSERT_LT(c.bound(below), n.area()) << e << " " << i;
-      }
-      if (e < 126) {
-        BvhNode twice = n;
-        twice.set_box(Box(n.box.min * 2.0f, n.box.max * 2.0f));
-        ASSERT_EQ(c2.ceiling(twice), bits) << e << " " << i;
-      }
-    }
-  }
-  // Inactive: bounds nothing, so a search drops nothing by it.
-  EXPECT_EQ(detail::AreaCeilings().bound(BvhNode{}), std::numeric_limits<double>::infinity());
-}
-
 TEST(UndoLog, RestoresTheExactTree) {
   std::mt19937_64 rng(31);
   detail::UndoLog log;
@@ -264,18 +228,6 @@ TEST(InsertionSearch, HandExample) {
   EXPECT_DOUBLE_EQ(c.cost, 6.0);
 }
 
-// The searches drop children by the area bound each node keeps while the optimizer runs; a
-// bound left stale by any change of a box (a move, a refit, an undone move, a restored log)
-// could drop the best place. Each must be the one its box gives now.
-::testing::AssertionResult area_ceilings_valid(const Bvh& t) {
-  const detail::AreaCeilings ceilings(t[t.root].area());
-  for (uint32_t n : t.depth_first_order())
-    if (t[n].spare != ceilings.ceiling(t[n]) || !(ceilings.bound(t[n]) >= t[n].area()))
-      return ::testing::AssertionFailure() << "node " << n << " keeps " << ceilings.bound(t[n]) << " for area "
-                                           << t[n].area();
-  return ::testing::AssertionSuccess();
-}
-
 void check_every_move(InsertionForm form, InsertionMeasure measure) {
   PrimitiveRefs refs = testing::random_refs(400, 7 + static_cast<int>(form));
   Bvh bvh = build_spatial_median(refs);
@@ -290,7 +242,6 @@ void check_every_move(InsertionForm form, InsertionMeasure measure) {
     ASSERT_TRUE(v.ok()) << v.summary();
     ASSERT_EQ(t.nodes.size(), 2 * refs.size() - 1);
     ASSERT_LT(relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
-    ASSERT_TRUE(area_ceilings_valid(t));
     ++checked;
   };
   OptimizeReport r = testing::optimize_insertion_observed(bvh, cfg, after_move);
@@ -298,26 +249,6 @@ void check_every_move(InsertionForm form, InsertionMeasure measure) {
   EXPECT_TRUE(validate(bvh, refs).ok());
   EXPECT_LT(relative_gap(r.final_cost, sah_cost(bvh)), 1e-9);
   EXPECT_LT(r.final_cost, r.initial_cost * 0.99);
-}
-
-// Large parallel passes over a small tree: many plans see boxes that earlier moves of the
-// pass changed, and are undone.
-TEST(InsertionOptimizer, AreaCeilingsValidAfterUndoneParallelMoves) {
-  PrimitiveRefs refs = testing::random_refs(3000, 11);
-  Bvh bvh = build_spatial_median(refs);
-  InsertionConfig cfg;
-  cfg.form = InsertionForm::parallel;
-  cfg.batch = 0.5;
-  cfg.limits.max_passes = 6;
-  uint64_t undone = 0;
-  double last = std::numeric_limits<double>::infinity();
-  auto after_move = [&](const Bvh& t, double tracked) {
-    undone += tracked == last;
-    last = tracked;
-    ASSERT_TRUE(area_ceilings_valid(t));
-  };
-  testing::optimize_insertion_observed(bvh, cfg, after_move);
-  EXPECT_GT(undone, 0u);
 }
 
 TEST(InsertionOptimizer, ValidAndCostTrackedAfterEveryMoveSequential) {

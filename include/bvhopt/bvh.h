@@ -20,7 +20,7 @@ inline constexpr size_t kMaxReferences = size_t(1) << 30;
 // builder calls it before allocating.
 void check_reference_count(size_t n, const char* who);
 
-// 40 bytes. Inner nodes hold two child indices; leaves hold a range of
+// 40 bytes: another 4 are free. Inner nodes hold two child indices; leaves hold a range of
 // slots in Bvh::ref_indices.
 //
 // The node used to cache its box's area as a float. A float cannot hold the areas of a
@@ -33,9 +33,7 @@ struct BvhNode {
   static constexpr uint32_t kLeafFlag = 0x80000000u;
 
   Box box;
-  // Free for one stage's own per-node data, valid only inside that stage (the insertion
-  // optimizer keeps an area bound there); keeps the layout 40 bytes. Files do not store it.
-  uint32_t spare = 0;
+  uint32_t unused = 0;  // keeps the layout 40 bytes (the file format does not store it)
   uint32_t parent = kInvalidNode;
   uint32_t left_or_first = kInvalidNode;  // inner: left child; leaf: first slot in ref_indices
   uint32_t right_or_count = 0;            // inner: right child; leaf: count | kLeafFlag

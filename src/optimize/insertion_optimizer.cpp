@@ -90,11 +90,6 @@ class InsertionOptimizer {
         inner_area_ += n.area();
     }
     root_area_ = bvh_[bvh_.root].area();
-    if (root_area_ > 0.0) {
-      // Every box of the stage lies in the root's, whose box never changes.
-      ceilings_ = detail::AreaCeilings(root_area_);
-      for (BvhNode& n : bvh_.nodes) ceilings_.store(n);
-    }
   }
 
   double cost() const { return (config_.cost.traversal * inner_area_ + leaf_term_) / root_area_; }
@@ -289,7 +284,7 @@ class InsertionOptimizer {
   uint32_t search_from(uint32_t m, uint32_t start) {
     const Box& box = bvh_[m].box;
     const ReinsertionCandidate seed{start, detail::placement_cost_along(bvh_, box, start, path_)};
-    return detail::search_reinsertion(bvh_, box, kInvalidNode, kInvalidNode, heap_, seed, ceilings_).node;
+    return detail::search_reinsertion(bvh_, box, kInvalidNode, kInvalidNode, heap_, seed).node;
   }
 
   // Meister-Bittner style: search every candidate against the current tree on all threads,
@@ -345,14 +340,9 @@ class InsertionOptimizer {
       if (b == nd.box) return;
       undo_.save(bvh_, n);
       const double old_area = nd.area();
-      set_box(nd, b);
+      nd.set_box(b);
       inner_area_ += nd.area() - old_area;
     }
-  }
-  // Every box the stage changes goes through here, so that its area ceiling stays valid.
-  void set_box(BvhNode& nd, const Box& b) const {
-    nd.set_box(b);
-    ceilings_.store(nd);
   }
   void save(uint32_t n) {
     if (n != kInvalidNode) undo_.save(bvh_, n);
@@ -368,7 +358,7 @@ class InsertionOptimizer {
     BvhNode& f = bvh_[free_node];
     f.make_inner(x, l);
     f.parent = q;
-    set_box(f, merge(bvh_[x].box, bvh_[l].box));
+    f.set_box(merge(bvh_[x].box, bvh_[l].box));
     inner_area_ += f.area();
     if (q == kInvalidNode)
       bvh_.root = free_node;
@@ -388,8 +378,7 @@ class InsertionOptimizer {
     for (int side = 0; side < 2; ++side) {
       const uint32_t m = bvh_[n].child(side);
       double freed = 0.0;
-      ReinsertionCandidate c =
-          detail::search_reinsertion_after_removal(bvh_, bvh_[m].box, m, heap, path, &freed, ceilings_);
+      ReinsertionCandidate c = detail::search_reinsertion_after_removal(bvh_, bvh_[m].box, m, heap, path, &freed);
       if (c.node == kInvalidNode) continue;
       // The search counts m's own area as freed; m stays a subtree, only its parent is freed.
       const double delta = c.cost - (freed - bvh_[m].area());
@@ -427,14 +416,6 @@ class InsertionOptimizer {
     return p;
   }
 
-  // Bvh::refit_upwards to the root, keeping the area ceilings.
-  void refit_to_root(uint32_t n) {
-    for (; n != kInvalidNode; n = bvh_[n].parent) {
-      BvhNode& nd = bvh_[n];
-      if (!nd.is_leaf()) set_box(nd, merge(bvh_[nd.left()].box, bvh_[nd.right()].box));
-    }
-  }
-
   uint64_t apply(const Plan& pl) {
     const uint32_t m = pl.moved, x = pl.target;
     // Read links only through untouched nodes: an untouched node still has the links the
@@ -468,7 +449,7 @@ class InsertionOptimizer {
         if (involved[i] != kInvalidNode) bvh_[involved[i]] = saved[i];
       bvh_.root = saved_root;
       for (uint32_t v : involved)
-        if (v != kInvalidNode) refit_to_root(v);
+        if (v != kInvalidNode) bvh_.refit_upwards(v, Bvh::RefitScope::to_root);
       inner_area_ = saved_area;
       notify_move();
       return 0;
@@ -496,7 +477,6 @@ class InsertionOptimizer {
   std::vector<Plan> plans_;
   detail::NodeSet touched_;  // nodes a move of this parallel pass changed
   detail::UndoLog undo_;
-  detail::AreaCeilings ceilings_;  // active when the root has an area
 
   double leaf_cost(double area, uint32_t count) const { return config_.cost.intersection * area * count; }
 };

@@ -9,7 +9,6 @@
 
 #include "bvhopt/bvh.h"
 #include "bvhopt/insertion_optimizer.h"
-#include "optimize/area_ceiling.h"
 
 namespace bvhopt::detail {
 
@@ -54,12 +53,10 @@ inline double placement_cost(const Bvh& bvh, const Box& box, uint32_t x, std::ve
 // loop allocates nothing. `start`, if given, is a place near where the subtree was (the
 // first candidate, not restricted by skip or pass_through): its cost bounds the search from
 // the first step, so far fewer nodes are queued; the minimum found is the same (on a tie
-// the start is kept). `ceilings`, if active, holds a valid bound of every node's area: it
-// drops children early and changes no result.
+// the start is kept).
 inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, uint32_t skip, uint32_t pass_through,
                                                std::vector<SearchEntry>& heap,
-                                               ReinsertionCandidate start = {kInvalidNode, 0.0},
-                                               const AreaCeilings& ceilings = {}) {
+                                               ReinsertionCandidate start = {kInvalidNode, 0.0}) {
   ReinsertionCandidate best{kInvalidNode, std::numeric_limits<double>::infinity()};
   if (bvh.empty()) return best;
   if (start.node != kInvalidNode) best = start;
@@ -94,7 +91,6 @@ inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, u
       const double total = e.induced + direct;
       if (total < best.cost && c != pass_through) best = {c, total};
       if (cn.is_leaf()) continue;
-      if (e.induced + (direct - ceilings.bound(cn)) + l_area >= best.cost) continue;
       // Written as induced + growth (never (induced + direct) - area): a sum of non-negative
       // terms rounds monotonically, so the bound never exceeds a true cost in the subtree
       // and the search stays exact to the last bit.
@@ -117,7 +113,7 @@ inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, u
 inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, const Box& box, uint32_t n,
                                                              std::vector<SearchEntry>& heap,
                                                              std::vector<std::pair<uint32_t, Box>>& path,
-                                                             double* gain, const AreaCeilings& ceilings = {}) {
+                                                             double* gain) {
   ReinsertionCandidate best{kInvalidNode, std::numeric_limits<double>::infinity()};
   const BvhNode* nodes = bvh.nodes.data();
   const uint32_t p = nodes[n].parent;
@@ -145,7 +141,6 @@ inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, con
     const double total = induced + direct;
     if (total < best.cost) best = {c, total};
     if (cn.is_leaf()) return;
-    if (induced + (direct - ceilings.bound(cn)) + l_area >= best.cost) return;
     const double child_induced = induced + (direct - static_cast<double>(cn.area()));
     if (child_induced + l_area < best.cost) {
       prefetch_children(nodes, cn);
