@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <functional>
@@ -215,8 +216,10 @@ class InsertionOptimizer {
   // A tree with fewer nodes than buckets keeps every key instead: the histogram's fixed
   // 2^16 steps would be most of a pass there (a few hundred nodes), and its keys fit in
   // less scratch than the histogram.
+  // The threshold moves little from pass to pass: the histogram's own scan also gathers the
+  // keys from a guess below the last pass's threshold, so a second scan of the node array is
+  // needed only when the threshold falls below the guess.
   void collect_largest_keys(size_t k) {
-    constexpr size_t kBuckets = size_t{1} << 16;
     const size_t count = bvh_.nodes.size();
     if (count <= kBuckets) {
       keys_.clear();
@@ -224,21 +227,45 @@ class InsertionOptimizer {
         if (!bvh_.nodes[i].is_leaf()) keys_.push_back(key(static_cast<uint32_t>(i)));
       return;
     }
-    auto bucket = [](uint64_t key) { return static_cast<size_t>(key >> 48); };
     tbb::combinable<std::vector<uint32_t>> local([] { return std::vector<uint32_t>(kBuckets, 0); });
+    tbb::combinable<std::vector<uint64_t>> gathered;
+    const size_t guess = guess_;
+    // A threshold that jumps up would gather far more than 3k keys: past 4k the gathering
+    // stops and the second scan runs, so the scratch stays about k keys.
+    std::atomic<bool> overflow = false;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 16384), [&](const tbb::blocked_range<size_t>& r) {
       std::vector<uint32_t>& h = local.local();
-      for (size_t i = r.begin(); i < r.end(); ++i)
-        if (!bvh_.nodes[i].is_leaf()) ++h[bucket(key(static_cast<uint32_t>(i)))];
+      std::vector<uint64_t>& out = gathered.local();
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        if (bvh_.nodes[i].is_leaf()) continue;
+        const uint64_t kk = key(static_cast<uint32_t>(i));
+        ++h[bucket(kk)];
+        if (bucket(kk) < guess || overflow.load(std::memory_order_relaxed)) continue;
+        if (out.size() >= 4 * k) overflow = true;
+        out.push_back(kk);
+      }
     });
-    std::vector<uint64_t> histogram(kBuckets, 0);
+    histogram_.assign(kBuckets, 0);
     local.combine_each([&](const std::vector<uint32_t>& h) {
-      for (size_t b = 0; b < kBuckets; ++b) histogram[b] += h[b];
+      for (size_t b = 0; b < kBuckets; ++b) histogram_[b] += h[b];
     });
     size_t first = kBuckets, above = 0;
-    while (first > 0 && above < k) above += histogram[--first];
+    while (first > 0 && above < k) above += histogram_[--first];
+    // The next guess: the lowest bucket with at most 3k keys from it up in this pass.
+    size_t next = first, upto = above;
+    while (next > 0 && upto + histogram_[next - 1] <= 3 * k) upto += histogram_[--next];
+    guess_ = next;
+    keys_.clear();
+    keys_.reserve(above);
     // Integer counts: the same threshold on any thread count; the kept set is then sorted by
     // key, so the order it was gathered in does not matter.
+    if (first >= guess && !overflow) {
+      gathered.combine_each([&](const std::vector<uint64_t>& part) {
+        for (uint64_t kk : part)
+          if (bucket(kk) >= first) keys_.push_back(kk);
+      });
+      return;
+    }
     tbb::combinable<std::vector<uint64_t>> kept;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 16384), [&](const tbb::blocked_range<size_t>& r) {
       std::vector<uint64_t>& out = kept.local();
@@ -248,10 +275,10 @@ class InsertionOptimizer {
         if (bucket(kk) >= first) out.push_back(kk);
       }
     });
-    keys_.clear();
-    keys_.reserve(above);
     kept.combine_each([&](const std::vector<uint64_t>& part) { keys_.insert(keys_.end(), part.begin(), part.end()); });
   }
+  static constexpr size_t kBuckets = size_t{1} << 16;
+  static size_t bucket(uint64_t key) { return static_cast<size_t>(key >> 48); }
 
   // The paper's step 2 for one node: remove N and its parent, reinsert both children
   // (larger first) at the best places in the tree as it is after the removal.
@@ -474,6 +501,8 @@ class InsertionOptimizer {
   std::vector<uint32_t> path_;
   size_t inner_count_ = 0;
   std::vector<uint64_t> keys_;
+  std::vector<uint64_t> histogram_;
+  size_t guess_ = size_t{1} << 16;  // lowest bucket whose keys the histogram's scan gathers
   std::vector<Plan> plans_;
   detail::NodeSet touched_;  // nodes a move of this parallel pass changed
   detail::UndoLog undo_;
