@@ -417,23 +417,19 @@ class SpatialSplitBuilder {
 
   Triangle triangle(uint32_t tri) const { return mesh_.triangle(tri); }
 
-  // Adds a reference crossing bins [enter, exit] of axis a: the triangle is cut at each
-  // boundary in turn, and each slab's piece (its bounds within the reference's box) goes
-  // to its bin. The reference enters at its first non-empty piece and leaves at its last.
+  // Adds a reference crossing bins [enter, exit] of axis a: the triangle is sliced at the
+  // boundaries between them, and each slab's piece (its bounds within the reference's box)
+  // goes to its bin. The reference enters at its first non-empty piece and leaves at its last.
   void bin_crossing(SpatialBins& bins, const SpatialMapping& m, int a, const SRef& r, uint32_t enter,
                     uint32_t exit) const {
-    ClipPolygon poly[2] = {ClipPolygon(triangle(r.tri)), ClipPolygon()}, piece;
-    int rest = 0;
+    float planes[kMaxBins];
+    Box pieces[kMaxBins];
+    const uint32_t cuts = exit - enter;
+    for (uint32_t j = 0; j < cuts; ++j) planes[j] = m.plane(a, enter + 1 + j);
+    slice_triangle(triangle(r.tri), a, planes, static_cast<int>(cuts), pieces);
     uint32_t first = kMaxBins, last = 0;
     for (uint32_t k = enter; k <= exit; ++k) {
-      Box b;
-      if (k < exit) {
-        split_polygon(poly[rest], a, m.plane(a, k + 1), piece, poly[1 - rest]);
-        b = intersect(piece.bounds(), r.box);
-        rest = 1 - rest;
-      } else {
-        b = intersect(poly[rest].bounds(), r.box);
-      }
+      const Box b = intersect(pieces[k - enter], r.box);
       if (b.is_empty()) continue;
       bins.box[a][k].extend(b);
       first = std::min(first, k);
@@ -533,10 +529,10 @@ class SpatialSplitBuilder {
     if (exit < s.bin) return 1;
     if (enter >= s.bin) return 2;
     const float plane = m->plane(a, s.bin);
-    ClipPolygon below, above;
-    split_polygon(ClipPolygon(triangle(ref.tri)), a, plane, below, above);
-    left.box = intersect(below.bounds(), ref.box);
-    right.box = intersect(above.bounds(), ref.box);
+    Box pieces[2];
+    slice_triangle(triangle(ref.tri), a, &plane, 1, pieces);
+    left.box = intersect(pieces[0], ref.box);
+    right.box = intersect(pieces[1], ref.box);
     if (left.box.is_empty() && right.box.is_empty()) {
       left.box = ref.box;  // rounding lost both pieces: keep the reference whole
       return enter < s.bin ? 1 : 2;
