@@ -189,6 +189,19 @@ struct Sides {
   }
 };
 
+// A partition's scratch: each reference's pieces and sides, and each block's counts.
+struct PartitionScratch {
+  std::vector<SRef> left, right;
+  std::vector<uint8_t> side;
+  std::vector<Sides> per_block;
+  std::vector<size_t> left_at, right_at;
+  void reserve(size_t count, size_t blocks) {
+    if (left.size() < count) left.resize(count), right.resize(count), side.resize(count);
+    if (per_block.size() < blocks) left_at.resize(blocks), right_at.resize(blocks);
+    per_block.assign(blocks, Sides{});
+  }
+};
+
 class SpatialSplitBuilder {
  public:
   SpatialSplitBuilder(const Mesh& mesh, const PrimitiveRefs& refs, const SpatialSplitConfig& config,
@@ -258,7 +271,7 @@ class SpatialSplitBuilder {
   // A leaf holds each triangle once: pieces of one triangle merge into one reference.
   void make_leaf(BvhNode& node, const Task& t) {
     SRef* s = slots_.get() + t.begin;
-    std::stable_sort(s, s + t.count, [](const SRef& a, const SRef& b) { return a.tri < b.tri; });
+    if (t.count > 1) std::sort(s, s + t.count, [](const SRef& a, const SRef& b) { return a.tri < b.tri; });
     size_t kept = 0;
     for (size_t i = 0; i < t.count; ++i) {
       if (kept > 0 && s[kept - 1].tri == s[i].tri)
@@ -417,25 +430,71 @@ class SpatialSplitBuilder {
 
   Triangle triangle(uint32_t tri) const { return mesh_.triangle(tri); }
 
-  // Adds a reference crossing bins [enter, exit] of axis a: the triangle is sliced at the
-  // boundaries between them, and each slab's piece (its bounds within the reference's box)
-  // goes to its bin. The reference enters at its first non-empty piece and leaves at its last.
+  // Adds a reference crossing bins [enter, exit] of axis a: each slab's piece of its triangle
+  // (bounded within the reference's box) goes to its bin. The reference enters at its first
+  // non-empty piece and leaves at its last. The bins only estimate the split's cost, so the
+  // pieces are bounded in float (the partition cuts the chosen split's references exactly,
+  // with slice_triangle): a piece is bounded by the triangle's sections at the slab's two
+  // planes and the corners between them, each section a segment between the long edge (the
+  // corners farthest apart on the axis) and one of the two short ones.
   void bin_crossing(SpatialBins& bins, const SpatialMapping& m, int a, const SRef& r, uint32_t enter,
                     uint32_t exit) const {
-    float planes[kMaxBins];
-    Box pieces[kMaxBins];
-    const uint32_t cuts = exit - enter;
-    for (uint32_t j = 0; j < cuts; ++j) planes[j] = m.plane(a, enter + 1 + j);
-    slice_triangle(triangle(r.tri), a, planes, static_cast<int>(cuts), pieces);
+    const Triangle tri = triangle(r.tri);
+    Vec3 c[3] = {tri.v0, tri.v1, tri.v2};
+    if (c[1][a] < c[0][a]) std::swap(c[0], c[1]);
+    if (c[2][a] < c[1][a]) std::swap(c[1], c[2]);
+    if (c[1][a] < c[0][a]) std::swap(c[0], c[1]);
+    const int u = a == 2 ? 0 : a + 1, w = a == 0 ? 2 : a - 1;
+    struct Edge {
+      float a0, inv, u0, du, w0, dw;
+    } e[3];
+    const int ends[3][2] = {{0, 2}, {0, 1}, {1, 2}};
+    for (int k = 0; k < 3; ++k) {
+      const Vec3& p = c[ends[k][0]];
+      const Vec3& q = c[ends[k][1]];
+      const float d = q[a] - p[a];
+      e[k] = Edge{p[a], d > 0.0f ? 1.0f / d : 0.0f, p[u], q[u] - p[u], p[w], q[w] - p[w]};
+    }
+    // The section at plane x: its bounds on u and w.
+    struct Section {
+      float ulo, uhi, wlo, whi;
+    };
+    auto section = [&](float x) {
+      const Edge& l = e[0];
+      const Edge& s = x <= c[1][a] ? e[1] : e[2];
+      const float tl = std::clamp((x - l.a0) * l.inv, 0.0f, 1.0f), ts = std::clamp((x - s.a0) * s.inv, 0.0f, 1.0f);
+      const float lu = l.u0 + tl * l.du, lw = l.w0 + tl * l.dw, su = s.u0 + ts * s.du, sw = s.w0 + ts * s.dw;
+      return Section{std::min(lu, su), std::max(lu, su), std::min(lw, sw), std::max(lw, sw)};
+    };
     uint32_t first = kMaxBins, last = 0;
+    Section below{};
+    float lo = -std::numeric_limits<float>::infinity();
     for (uint32_t k = enter; k <= exit; ++k) {
-      const Box b = intersect(pieces[k - enter], r.box);
+      const float hi = k < exit ? m.plane(a, k + 1) : std::numeric_limits<float>::infinity();
+      Box b;
+      for (const Vec3& v : c)
+        if (v[a] >= lo && v[a] <= hi) b.extend(v);
+      Section above{};
+      if (k > enter) {
+        b.min[a] = std::min(b.min[a], lo), b.max[a] = std::max(b.max[a], lo);
+        b.min[u] = std::min(b.min[u], below.ulo), b.max[u] = std::max(b.max[u], below.uhi);
+        b.min[w] = std::min(b.min[w], below.wlo), b.max[w] = std::max(b.max[w], below.whi);
+      }
+      if (k < exit) {
+        above = section(hi);
+        b.min[a] = std::min(b.min[a], hi), b.max[a] = std::max(b.max[a], hi);
+        b.min[u] = std::min(b.min[u], above.ulo), b.max[u] = std::max(b.max[u], above.uhi);
+        b.min[w] = std::min(b.min[w], above.wlo), b.max[w] = std::max(b.max[w], above.whi);
+      }
+      below = above;
+      lo = hi;
+      b = intersect(b, r.box);
       if (b.is_empty()) continue;
       bins.box[a][k].extend(b);
       first = std::min(first, k);
       last = k;
     }
-    if (first == kMaxBins) {  // rounding left no piece: count the reference whole
+    if (first == kMaxBins) {  // no piece inside the reference's box: count it whole
       bins.box[a][enter].extend(r.box);
       first = last = enter;
     }
@@ -569,9 +628,16 @@ class SpatialSplitBuilder {
     const SpatialMapping m(t.state.box, config_.spatial_bins);
     const ObjectMapping om(t.state.centres, object_bin_count(t.count));
     const size_t blocks = (t.count + kBlock - 1) / kBlock;
-    std::vector<SRef> left(t.count), right(t.count);
-    std::vector<uint8_t> side(t.count);
-    std::vector<Sides> per_block(blocks);
+    // A serial partition takes its scratch from its thread (nothing else runs on the thread
+    // meanwhile); a parallel one waits in parallel_for, where this thread may run another.
+    PartitionScratch own;
+    thread_local PartitionScratch reused;
+    PartitionScratch& scratch = parallel(t.count) ? own : reused;
+    scratch.reserve(t.count, blocks);
+    SRef* left = scratch.left.data();
+    SRef* right = scratch.right.data();
+    uint8_t* side = scratch.side.data();
+    Sides* per_block = scratch.per_block.data();
     auto classify_block = [&](size_t b) {
       Sides& sides = per_block[b];
       const size_t end = std::min(t.count, (b + 1) * kBlock);
@@ -594,7 +660,8 @@ class SpatialSplitBuilder {
     else
       for (size_t b = 0; b < blocks; ++b) classify_block(b);
     Sides total;
-    std::vector<size_t> left_at(blocks), right_at(blocks);
+    size_t* left_at = scratch.left_at.data();
+    size_t* right_at = scratch.right_at.data();
     for (size_t b = 0; b < blocks; ++b) {
       left_at[b] = total.left;
       right_at[b] = total.right;
@@ -630,23 +697,59 @@ class SpatialSplitBuilder {
 
   // The slots the leaves use become the result's references, numbered depth-first; the
   // unused nodes and slots are dropped; boxes are refitted to the final pieces (a node's
-  // pieces can be smaller than the box its parent measured before cutting them).
+  // pieces can be smaller than the box its parent measured before cutting them). Each
+  // subtree numbers its nodes after its root, the left subtree's before the right's, and
+  // its slots likewise, so depth-first order is ascending order of nodes and of slots: one
+  // scan renumbers them, and a backward scan over the result refits children before parents.
   void compact() {
     Bvh& bvh = out_.bvh;
-    bvh.ref_indices.resize(capacity_);
-    for (size_t i = 0; i < capacity_; ++i) bvh.ref_indices[i] = static_cast<uint32_t>(i);
-    bvh.renumber_depth_first();
+    std::vector<BvhNode> nodes;
+    std::vector<uint32_t> new_index(bvh.nodes.size(), kInvalidNode);
+    uint32_t next = 0;
+    size_t used_slots = 0;
+    for (size_t i = 0; i < bvh.nodes.size(); ++i) {
+      const BvhNode& nd = bvh.nodes[i];
+      if (nd.left_or_first == kInvalidNode) continue;  // never built
+      new_index[i] = next++;
+      if (nd.is_leaf()) used_slots += nd.ref_count();
+    }
+    nodes.resize(next);
     PrimitiveRefs& refs = out_.refs;
-    refs.resize(bvh.ref_indices.size());
-    for (size_t i = 0; i < refs.size(); ++i) {
-      const SRef& s = slots_[bvh.ref_indices[i]];
-      refs.boxes[i] = s.box;
-      refs.centroids[i] = s.box.center();
-      refs.triangle_ids[i] = s.tri;
-      bvh.ref_indices[i] = static_cast<uint32_t>(i);
+    refs.resize(used_slots);
+    uint32_t ref = 0;
+    for (size_t i = 0; i < bvh.nodes.size(); ++i) {
+      if (new_index[i] == kInvalidNode) continue;
+      BvhNode nd = bvh.nodes[i];
+      if (nd.parent != kInvalidNode) nd.parent = new_index[nd.parent];
+      if (nd.is_leaf()) {
+        const uint32_t first = ref;
+        for (uint32_t k = 0; k < nd.ref_count(); ++k, ++ref) {
+          const SRef& s = slots_[nd.first_ref() + k];
+          refs.boxes[ref] = s.box;
+          refs.centroids[ref] = s.box.center();
+          refs.triangle_ids[ref] = s.tri;
+        }
+        nd.make_leaf(first, nd.ref_count());
+      } else {
+        nd.make_inner(new_index[nd.left()], new_index[nd.right()]);
+      }
+      nodes[new_index[i]] = nd;
     }
     slots_.reset();
-    bvh.refit(refs);
+    for (size_t i = nodes.size(); i-- > 0;) {
+      BvhNode& nd = nodes[i];
+      if (nd.is_leaf()) {
+        Box b;
+        for (uint32_t k = 0; k < nd.ref_count(); ++k) b.extend(refs.boxes[nd.first_ref() + k]);
+        nd.set_box(b);
+      } else {
+        nd.set_box(merge(nodes[nd.left()].box, nodes[nd.right()].box));
+      }
+    }
+    bvh.nodes = std::move(nodes);
+    bvh.ref_indices.resize(ref);
+    for (uint32_t i = 0; i < ref; ++i) bvh.ref_indices[i] = i;
+    bvh.root = 0;
   }
 
   const Mesh& mesh_;
