@@ -151,9 +151,9 @@ void embree_split(const RTCBuildPrimitive* prim, unsigned int dim, float pos, RT
                   void* user) {
   const Mesh& mesh = *static_cast<EmbreeUser*>(user)->mesh;
   const Box box(Vec3(prim->lower_x, prim->lower_y, prim->lower_z), Vec3(prim->upper_x, prim->upper_y, prim->upper_z));
-  ClipPolygon below, above;
-  split_polygon(ClipPolygon(mesh.triangle(prim->primID)), int(dim), pos, below, above);
-  Box l = intersect(below.bounds(), box), r = intersect(above.bounds(), box);
+  Box pieces[2];
+  slice_triangle(mesh.triangle(prim->primID), int(dim), &pos, 1, pieces);
+  Box l = intersect(pieces[0], box), r = intersect(pieces[1], box);
   // Embree expects both sides non-empty; a side rounding lost is the plane itself.
   if (l.is_empty()) l = box, l.max[dim] = pos, l.min[dim] = std::min(l.min[dim], pos);
   if (r.is_empty()) r = box, r.min[dim] = pos, r.max[dim] = std::max(r.max[dim], pos);
