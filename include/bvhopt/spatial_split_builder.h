@@ -20,7 +20,9 @@ struct SpatialSplitParams {
   // Spatial splits are tried at a node only when its best object split's two boxes overlap
   // by more than alpha times the root's surface area (the paper's alpha).
   double alpha = 1e-5;
-  uint32_t spatial_bins = 32;  // bins per axis over the node's box (2 to 128)
+  // Bins per axis over the node's box (2 to 128); a node of n references uses at most
+  // 4 + n / 2 of them.
+  uint32_t spatial_bins = 32;
   // Object splits are binned by box centre: a node of n references uses
   // clamp(n / 256, object_bins, 128) bins, at most 4 + n / 5 (as the binned builder).
   uint32_t object_bins = 32;  // 2 to 128
