@@ -32,7 +32,7 @@ struct SpatialSplitParams {
   // every node, against 47.85 binned), though alone it is the sweep builder's lower cost.
   uint32_t exact_sweep_below = 0;
   // Nodes with at least this many references bin and partition in parallel.
-  uint32_t parallel_binning_threshold = 65536;
+  uint32_t parallel_binning_threshold = 8192;
 };
 
 struct SpatialSplitConfig : BuilderConfig, SpatialSplitParams {};

@@ -21,7 +21,7 @@ namespace bvhopt {
 namespace {
 
 constexpr uint32_t kMaxBins = 128;
-constexpr size_t kBlock = 16384;  // references per block of a parallel pass (fixed: deterministic)
+constexpr size_t kBlock = 2048;  // references per block of a parallel pass (fixed: deterministic)
 
 // The builder's working reference: the box of the part of its triangle it stands for.
 struct SRef {
