@@ -191,12 +191,12 @@ struct Sides {
 
 // A partition's scratch: each reference's pieces and sides, and each block's counts.
 struct PartitionScratch {
-  std::vector<SRef> left, right;
+  std::vector<SRef> whole, left, right;  // the node's references; pieces of the cut ones
   std::vector<uint8_t> side;
   std::vector<Sides> per_block;
   std::vector<size_t> left_at, right_at;
   void reserve(size_t count, size_t blocks) {
-    if (left.size() < count) left.resize(count), right.resize(count), side.resize(count);
+    if (whole.size() < count) whole.resize(count), left.resize(count), right.resize(count), side.resize(count);
     if (per_block.size() < blocks) left_at.resize(blocks), right_at.resize(blocks);
     per_block.assign(blocks, Sides{});
   }
@@ -575,39 +575,36 @@ class SpatialSplitBuilder {
     return true;
   }
 
-  // Where a reference goes: bit 1 left (piece in `left`), bit 2 right (piece in `right`).
+  // Where a reference goes: bit 1 left, bit 2 right; with bit 4 its pieces are in `left` and
+  // `right` (written only then), without it the reference goes whole.
+  static constexpr uint8_t kLeft = 1, kRight = 2, kPieces = 4;
   uint8_t classify(const Split& s, const SpatialMapping* m, const ObjectMapping* om, size_t index, const SRef& ref,
                    SRef& left, SRef& right, Sides& sides) const {
     switch (s.kind) {
       case Split::halve:
-        left = right = ref;
-        return index < s.bin ? 1 : 2;
+        return index < s.bin ? kLeft : kRight;
       case Split::object:
-        left = right = ref;
-        return om->bin(ref.box, s.axis) < s.bin ? 1 : 2;
+        return om->bin(ref.box, s.axis) < s.bin ? kLeft : kRight;
       case Split::sweep:
-        left = right = ref;
-        return s.left_flag[index] ? 1 : 2;
+        return s.left_flag[index] ? kLeft : kRight;
       default:
         break;
     }
     const int a = s.axis;
-    left = right = ref;
     const uint32_t enter = m->enter_bin(a, ref.box.min[a]);
     const uint32_t exit = std::max(enter, m->exit_bin(a, ref.box.max[a]));
-    if (exit < s.bin) return 1;
-    if (enter >= s.bin) return 2;
+    if (exit < s.bin) return kLeft;
+    if (enter >= s.bin) return kRight;
     const float plane = m->plane(a, s.bin);
+    left = right = ref;
     Box pieces[2];
     slice_triangle(triangle(ref.tri), a, &plane, 1, pieces);
     left.box = intersect(pieces[0], ref.box);
     right.box = intersect(pieces[1], ref.box);
-    if (left.box.is_empty() && right.box.is_empty()) {
-      left.box = ref.box;  // rounding lost both pieces: keep the reference whole
-      return enter < s.bin ? 1 : 2;
-    }
-    if (left.box.is_empty()) return 2;
-    if (right.box.is_empty()) return 1;
+    if (left.box.is_empty() && right.box.is_empty())  // rounding lost both pieces: keep the reference whole
+      return enter < s.bin ? kLeft : kRight;
+    if (left.box.is_empty()) return kRight | kPieces;
+    if (right.box.is_empty()) return kLeft | kPieces;
     // Unsplitting: the whole reference on one side, if that costs less than cutting it
     // (each reference judged against the split's own boxes and counts, so the order in
     // which they are judged does not matter).
@@ -617,17 +614,15 @@ class SpatialSplitBuilder {
     const float c_left = merge(s.left, ref.box).area() * nl + ar * (nr - 1.0f);
     const float c_right = al * (nl - 1.0f) + merge(s.right, ref.box).area() * nr;
     if (c_left < c_split && c_left <= c_right) {
-      left.box = ref.box;
       ++sides.unsplit;
-      return 1;
+      return kLeft;
     }
     if (c_right < c_split) {
-      right.box = ref.box;
       ++sides.unsplit;
-      return 2;
+      return kRight;
     }
     ++sides.cut;
-    return 3;
+    return kLeft | kRight | kPieces;
   }
 
   // Two passes over fixed blocks: each reference's pieces go to a scratch copy and each
@@ -646,22 +641,28 @@ class SpatialSplitBuilder {
     scratch.reserve(t.count, blocks);
     SRef* left = scratch.left.data();
     SRef* right = scratch.right.data();
+    SRef* whole = scratch.whole.data();
     uint8_t* side = scratch.side.data();
     Sides* per_block = scratch.per_block.data();
     auto classify_block = [&](size_t b) {
       Sides& sides = per_block[b];
       const size_t end = std::min(t.count, (b + 1) * kBlock);
       for (size_t i = b * kBlock; i < end; ++i) {
-        side[i] = classify(s, &m, &om, i, slots_[t.begin + i], left[i], right[i], sides);
-        if (side[i] & 1) {
+        const SRef& ref = slots_[t.begin + i];
+        whole[i] = ref;
+        const uint8_t to = classify(s, &m, &om, i, ref, left[i], right[i], sides);
+        side[i] = to;
+        if (to & kLeft) {
+          const Box& box = to & kPieces ? left[i].box : ref.box;
           ++sides.left;
-          sides.l.box.extend(left[i].box);
-          sides.l.centres.extend(left[i].box.center());
+          sides.l.box.extend(box);
+          sides.l.centres.extend(box.center());
         }
-        if (side[i] & 2) {
+        if (to & kRight) {
+          const Box& box = to & kPieces ? right[i].box : ref.box;
           ++sides.right;
-          sides.r.box.extend(right[i].box);
-          sides.r.centres.extend(right[i].box.center());
+          sides.r.box.extend(box);
+          sides.r.centres.extend(box.center());
         }
       }
     };
@@ -687,8 +688,8 @@ class SpatialSplitBuilder {
       SRef* hi = slots_.get() + t.begin + left_room + right_at[b];
       const size_t end = std::min(t.count, (b + 1) * kBlock);
       for (size_t i = b * kBlock; i < end; ++i) {
-        if (side[i] & 1) *lo++ = left[i];
-        if (side[i] & 2) *hi++ = right[i];
+        if (side[i] & kLeft) *lo++ = side[i] & kPieces ? left[i] : whole[i];
+        if (side[i] & kRight) *hi++ = side[i] & kPieces ? right[i] : whole[i];
       }
     };
     if (parallel(t.count))
