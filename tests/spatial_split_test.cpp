@@ -188,6 +188,48 @@ TEST(TriangleClipping, SplitPiecesAreBelowAndAboveThePlaneAndCoverTheTriangle) {
   }
 }
 
+// Slicing by several planes at once: each piece as the double oracle bounds the triangle
+// within its slab, the pieces together the whole triangle, and one plane exactly as
+// split_polygon cuts it. Planes repeat and pass through corners, where a corner belongs to
+// every piece whose slab holds it.
+TEST(TriangleClipping, SlicesMatchTheOracleSlabBySlab) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<float> u(-1.5f, 1.5f);
+  size_t cut = 0;
+  for (int i = 0; i < 5000; ++i) {
+    const Triangle tri{random_point(rng, 1.0f), random_point(rng, 1.0f), random_point(rng, 1.0f)};
+    const int axis = i % 3;
+    const int count = 1 + i % 9;
+    std::vector<float> planes(count);
+    for (float& p : planes) p = u(rng);
+    if (i % 4 == 0) planes[0] = tri.v1[axis];         // through a corner
+    if (i % 5 == 0 && count > 1) planes[1] = planes[0];  // a repeated plane
+    std::sort(planes.begin(), planes.end());
+    std::vector<Box> pieces(count + 1);
+    slice_triangle(tri, axis, planes.data(), count, pieces.data());
+    const Box around(tri.bounds().min - Vec3(1.0f), tri.bounds().max + Vec3(1.0f));
+    Box all;
+    for (int k = 0; k <= count; ++k) {
+      Box slab = around;
+      if (k > 0) slab.min[axis] = planes[k - 1];
+      if (k < count) slab.max[axis] = planes[k];
+      if (slab.is_empty()) continue;  // a plane outside the box around the triangle
+      expect_matches_oracle(tri, slab, pieces[k], "slice " + std::to_string(i) + " piece " + std::to_string(k));
+      all.extend(pieces[k]);
+      cut += k > 0 && k < count && !pieces[k].is_empty();
+    }
+    EXPECT_TRUE(all.contains(tri.bounds())) << i;
+    if (count == 1) {
+      ClipPolygon below, above;
+      split_polygon(ClipPolygon(tri), axis, planes[0], below, above);
+      EXPECT_EQ(pieces[0], below.bounds()) << i;
+      EXPECT_EQ(pieces[1], above.bounds()) << i;
+    }
+    if (HasFailure()) break;
+  }
+  EXPECT_GT(cut, 2000u);  // most slices have pieces between two planes
+}
+
 // Zero area (coincident and collinear corners), triangles in an axis plane, needles: no
 // NaN, the pieces inside the triangle's box, and the oracle's bounds where it has them.
 TEST(TriangleClipping, DegenerateTrianglesClipWithoutNaN) {

@@ -456,7 +456,12 @@ class SpatialSplitBuilder {
     c[int(x1 >= x0) + int(x1 > x2)] = tri.v1;
     c[int(x2 >= x0) + int(x2 >= x1)] = tri.v2;
     const int u = a == 2 ? 0 : a + 1, w = a == 0 ? 2 : a - 1;
-    auto inverse = [](float d) { return d > 0.0f ? 1.0f / d : 0.0f; };
+    // An edge too short for its inverse in float counts as flat: its sections are its start
+    // (an estimate still inside the triangle, never a NaN from 0 * infinity).
+    auto inverse = [](float d) {
+      const float inv = d > 0.0f ? 1.0f / d : 0.0f;
+      return std::isfinite(inv) ? inv : 0.0f;
+    };
     const float inv_long = inverse(c[2][a] - c[0][a]), inv_low = inverse(c[1][a] - c[0][a]),
                 inv_high = inverse(c[2][a] - c[1][a]);
     const uint32_t cuts = exit - enter;
