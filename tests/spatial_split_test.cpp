@@ -294,6 +294,7 @@ SpatialSplitResult build_sbvh(const Mesh& mesh, double budget = 1.3, uint32_t le
   config.leaf.max_leaf_size = leaf;
   config.parallel_threshold = 64;  // many tasks even on a small scene
   config.parallel_binning_threshold = 1024;
+  config.spatial_from = 0;  // spatial splits down to the smallest nodes, where the tests' scenes have most
   return build_spatial_split(mesh, refs ? *refs : make_references(mesh), config);
 }
 
@@ -367,6 +368,19 @@ TEST(SpatialSplit, ExactSweepPathIsValidAndDeterministic) {
   const PrimitiveRefs refs = make_references(mesh);
   const SpatialSplitResult all_sweep = build_sbvh(mesh, 1.0, 1, nullptr, 1 << 16);
   EXPECT_NEAR(sah_cost(all_sweep.bvh), sah_cost(build_sweep_sah(refs)), 1e-9 * sah_cost(all_sweep.bvh));
+}
+
+// Nodes below spatial_from take object splits only: none at all when no node is that large.
+TEST(SpatialSplit, SpatialSplitsOnlyFromTheGivenNodeSize) {
+  const Mesh mesh = crossing_mesh(3000, 17);
+  SpatialSplitConfig config;
+  config.spatial_from = 0;
+  const SpatialSplitResult everywhere = build_spatial_split(mesh, make_references(mesh), config);
+  config.spatial_from = static_cast<uint32_t>(mesh.triangle_count()) + 1;
+  const SpatialSplitResult nowhere = build_spatial_split(mesh, make_references(mesh), config);
+  EXPECT_GT(everywhere.stats.spatial_splits, 0u);
+  EXPECT_EQ(nowhere.stats.spatial_splits, 0u);
+  EXPECT_EQ(nowhere.refs.size(), mesh.triangle_count());
 }
 
 TEST(SpatialSplit, BudgetIsNeverExceeded) {

@@ -554,7 +554,7 @@ class SpatialSplitBuilder {
     if (t.count <= 1) return false;
     Split object = find_object_split(t);
     Split spatial;
-    const bool room = t.capacity > t.count;
+    const bool room = t.capacity > t.count && t.count >= config_.spatial_from;
     if (room && (object.axis < 0 || overlap_area(object.left, object.right) > float(config_.alpha) * root_area_))
       spatial = find_spatial_split(t);
     const bool use_spatial = spatial.axis >= 0 && spatial.cost < object.cost;
