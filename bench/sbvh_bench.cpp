@@ -6,12 +6,13 @@
 //
 // Default table, per shared scene: our SBVH build (build_spatial_split, budget --budget)
 // and Embree HIGH (rtcBuildBVH with RTC_BUILD_QUALITY_HIGH, spatial splits through a
-// splitPrimitive callback that clips the triangle exactly, room for --embree-budget times
-// the references), both on --threads threads, timed interleaved in the same run (median of
-// --runs, wall and process CPU time): references per second and per triangle, cost and
-// ocost (counting each triangle once per leaf); then our tree after insertion optimization
-// (to convergence, or --opt-seconds) and its ocost, beside the best split peer
-// figures (tinybvh BuildHQ + Optimize(50, extreme), or Embree HIGH; c_T = 3, c_I = 2).
+// splitPrimitive callback that cuts the triangle in float as Embree's own splitter does,
+// room for --embree-budget times the references), both on --threads threads, timed
+// interleaved in the same run (median of --runs, wall and process CPU time): references
+// per second and per triangle, cost and ocost (counting each triangle once per leaf);
+// then our tree after insertion optimization (to convergence, or --opt-seconds) and its
+// ocost, beside the best split peer figures (tinybvh BuildHQ + Optimize(50,
+// extreme), or Embree HIGH; c_T = 3, c_I = 2).
 //
 // --compare: the edge volume heuristic beside spatial splits, per scene unrotated and
 // rotated by (30, 30, 0): sweep, sweep + EVH, SBVH and SBVH + EVH, each built (median of

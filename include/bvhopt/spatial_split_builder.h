@@ -70,14 +70,16 @@ struct SpatialSplitResult {
 };
 
 // Each node takes the cheaper of the best object split (binned over box centres) and, when
-// its boxes overlap by more than alpha, the best spatial split: binned over the node's box,
-// where a reference crossing bins is cut by clipping its triangle exactly (Sutherland-
-// Hodgman, triangle_clipping.h) against each bin's slab and intersecting with its box. A
-// crossing reference of the chosen spatial split goes whole to one side when that is
-// cheaper (the paper's reference unsplitting). Each subtree owns a fixed range of
-// reference slots whose spare room is shared between the children by their counts, so the
-// budget holds without any shared counter, and the tree is the same on any number of
-// threads. Leaf boxes and inner boxes are refitted to the final references.
+// its boxes overlap by more than alpha and it holds at least spatial_from references, the
+// best spatial split: binned over the node's box, where a reference crossing bins adds to
+// each bin its triangle's piece in that slab (bounded in float: the bins only estimate the
+// cost). The chosen split cuts its crossing references exactly (slice_triangle,
+// triangle_clipping.h) and intersects each piece with the reference's box; a crossing
+// reference goes whole to one side when that is cheaper (the paper's reference
+// unsplitting). Each subtree owns a fixed range of reference slots whose spare room is
+// shared between the children by their counts, so the budget holds without any shared
+// counter, and the tree is the same on any number of threads. Leaf boxes and inner boxes
+// are refitted to the final references.
 SpatialSplitResult build_spatial_split(const Mesh& mesh, const PrimitiveRefs& refs,
                                        const SpatialSplitConfig& config = {});
 
