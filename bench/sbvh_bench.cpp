@@ -6,12 +6,13 @@
 //
 // Default table, per shared scene: our SBVH build (build_spatial_split, budget --budget)
 // and Embree HIGH (rtcBuildBVH with RTC_BUILD_QUALITY_HIGH, spatial splits through a
-// splitPrimitive callback that clips the triangle exactly, room for --embree-budget times
-// the references), both on --threads threads, timed interleaved in the same run (median of
-// --runs, wall and process CPU time): references per second and per triangle, cost and
-// ocost (counting each triangle once per leaf); then our tree after insertion optimization
-// (to convergence, or --opt-seconds) and its ocost, beside the best split peer
-// figures (tinybvh BuildHQ + Optimize(50, extreme), or Embree HIGH; c_T = 3, c_I = 2).
+// splitPrimitive callback that cuts the triangle in float as Embree's own splitter does,
+// room for --embree-budget times the references), both on --threads threads, timed
+// interleaved in the same run (median of --runs, wall and process CPU time): references
+// per second and per triangle, cost and ocost (counting each triangle once per leaf);
+// then our tree after insertion optimization (to convergence, or --opt-seconds) and its
+// ocost, beside the best split peer figures (tinybvh BuildHQ + Optimize(50,
+// extreme), or Embree HIGH; c_T = 3, c_I = 2).
 //
 // --compare: the edge volume heuristic beside spatial splits, per scene unrotated and
 // rotated by (30, 30, 0): sweep, sweep + EVH, SBVH and SBVH + EVH, each built (median of
@@ -145,15 +146,32 @@ struct EmbreeUser {
   const Mesh* mesh;
 };
 
-// The same exact clipping as ours: the triangle cut at the plane, each side's bounds within
-// the piece's box.
+// The triangle cut at the plane in float, as Embree's own triangle splitter cuts it: each
+// corner to its side(s), each edge crossing the plane adds its crossing point to both, and
+// each side is bounded within the piece's box. (Our exact double clipping here would make
+// the peer's build time mostly ours: the callback runs for every piece Embree bins.)
 void embree_split(const RTCBuildPrimitive* prim, unsigned int dim, float pos, RTCBounds* left, RTCBounds* right,
                   void* user) {
   const Mesh& mesh = *static_cast<EmbreeUser*>(user)->mesh;
   const Box box(Vec3(prim->lower_x, prim->lower_y, prim->lower_z), Vec3(prim->upper_x, prim->upper_y, prim->upper_z));
-  ClipPolygon below, above;
-  split_polygon(ClipPolygon(mesh.triangle(prim->primID)), int(dim), pos, below, above);
-  Box l = intersect(below.bounds(), box), r = intersect(above.bounds(), box);
+  const Triangle tri = mesh.triangle(prim->primID);
+  const Vec3 v[3] = {tri.v0, tri.v1, tri.v2};
+  const int a = int(dim);
+  Box l, r;
+  for (int e = 0; e < 3; ++e) {
+    const Vec3& p = v[e];
+    const Vec3& q = v[e == 2 ? 0 : e + 1];
+    if (p[a] <= pos) l.extend(p);
+    if (p[a] >= pos) r.extend(p);
+    if ((p[a] < pos && pos < q[a]) || (q[a] < pos && pos < p[a])) {
+      const float t = (pos - p[a]) / (q[a] - p[a]);
+      Vec3 c = p + (q - p) * t;
+      c[a] = pos;
+      l.extend(c);
+      r.extend(c);
+    }
+  }
+  l = intersect(l, box), r = intersect(r, box);
   // Embree expects both sides non-empty; a side rounding lost is the plane itself.
   if (l.is_empty()) l = box, l.max[dim] = pos, l.min[dim] = std::min(l.min[dim], pos);
   if (r.is_empty()) r = box, r.min[dim] = pos, r.max[dim] = std::max(r.max[dim], pos);

@@ -188,6 +188,48 @@ TEST(TriangleClipping, SplitPiecesAreBelowAndAboveThePlaneAndCoverTheTriangle) {
   }
 }
 
+// Slicing by several planes at once: each piece as the double oracle bounds the triangle
+// within its slab, the pieces together the whole triangle, and one plane exactly as
+// split_polygon cuts it. Planes repeat and pass through corners, where a corner belongs to
+// every piece whose slab holds it.
+TEST(TriangleClipping, SlicesMatchTheOracleSlabBySlab) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<float> u(-1.5f, 1.5f);
+  size_t cut = 0;
+  for (int i = 0; i < 5000; ++i) {
+    const Triangle tri{random_point(rng, 1.0f), random_point(rng, 1.0f), random_point(rng, 1.0f)};
+    const int axis = i % 3;
+    const int count = 1 + i % 9;
+    std::vector<float> planes(count);
+    for (float& p : planes) p = u(rng);
+    if (i % 4 == 0) planes[0] = tri.v1[axis];         // through a corner
+    if (i % 5 == 0 && count > 1) planes[1] = planes[0];  // a repeated plane
+    std::sort(planes.begin(), planes.end());
+    std::vector<Box> pieces(count + 1);
+    slice_triangle(tri, axis, planes.data(), count, pieces.data());
+    const Box around(tri.bounds().min - Vec3(1.0f), tri.bounds().max + Vec3(1.0f));
+    Box all;
+    for (int k = 0; k <= count; ++k) {
+      Box slab = around;
+      if (k > 0) slab.min[axis] = planes[k - 1];
+      if (k < count) slab.max[axis] = planes[k];
+      if (slab.is_empty()) continue;  // a plane outside the box around the triangle
+      expect_matches_oracle(tri, slab, pieces[k], "slice " + std::to_string(i) + " piece " + std::to_string(k));
+      all.extend(pieces[k]);
+      cut += k > 0 && k < count && !pieces[k].is_empty();
+    }
+    EXPECT_TRUE(all.contains(tri.bounds())) << i;
+    if (count == 1) {
+      ClipPolygon below, above;
+      split_polygon(ClipPolygon(tri), axis, planes[0], below, above);
+      EXPECT_EQ(pieces[0], below.bounds()) << i;
+      EXPECT_EQ(pieces[1], above.bounds()) << i;
+    }
+    if (HasFailure()) break;
+  }
+  EXPECT_GT(cut, 2000u);  // most slices have pieces between two planes
+}
+
 // Zero area (coincident and collinear corners), triangles in an axis plane, needles: no
 // NaN, the pieces inside the triangle's box, and the oracle's bounds where it has them.
 TEST(TriangleClipping, DegenerateTrianglesClipWithoutNaN) {
@@ -252,6 +294,7 @@ SpatialSplitResult build_sbvh(const Mesh& mesh, double budget = 1.3, uint32_t le
   config.leaf.max_leaf_size = leaf;
   config.parallel_threshold = 64;  // many tasks even on a small scene
   config.parallel_binning_threshold = 1024;
+  config.spatial_from = 0;  // spatial splits down to the smallest nodes, where the tests' scenes have most
   return build_spatial_split(mesh, refs ? *refs : make_references(mesh), config);
 }
 
@@ -325,6 +368,19 @@ TEST(SpatialSplit, ExactSweepPathIsValidAndDeterministic) {
   const PrimitiveRefs refs = make_references(mesh);
   const SpatialSplitResult all_sweep = build_sbvh(mesh, 1.0, 1, nullptr, 1 << 16);
   EXPECT_NEAR(sah_cost(all_sweep.bvh), sah_cost(build_sweep_sah(refs)), 1e-9 * sah_cost(all_sweep.bvh));
+}
+
+// Nodes below spatial_from take object splits only: none at all when no node is that large.
+TEST(SpatialSplit, SpatialSplitsOnlyFromTheGivenNodeSize) {
+  const Mesh mesh = crossing_mesh(3000, 17);
+  SpatialSplitConfig config;
+  config.spatial_from = 0;
+  const SpatialSplitResult everywhere = build_spatial_split(mesh, make_references(mesh), config);
+  config.spatial_from = static_cast<uint32_t>(mesh.triangle_count()) + 1;
+  const SpatialSplitResult nowhere = build_spatial_split(mesh, make_references(mesh), config);
+  EXPECT_GT(everywhere.stats.spatial_splits, 0u);
+  EXPECT_EQ(nowhere.stats.spatial_splits, 0u);
+  EXPECT_EQ(nowhere.refs.size(), mesh.triangle_count());
 }
 
 TEST(SpatialSplit, BudgetIsNeverExceeded) {

@@ -20,7 +20,15 @@ struct SpatialSplitParams {
   // Spatial splits are tried at a node only when its best object split's two boxes overlap
   // by more than alpha times the root's surface area (the paper's alpha).
   double alpha = 1e-5;
-  uint32_t spatial_bins = 32;  // bins per axis over the node's box (2 to 128)
+  // Bins per axis over the node's box (2 to 128); a node of n references uses at most
+  // 4 + n / 2 of them.
+  uint32_t spatial_bins = 32;
+  // Nodes of fewer references take object splits only. The split's SAH counts each child as
+  // a leaf, which near the leaves undervalues what a spatial split's extra references cost
+  // below it: on the shared scenes, spatial splits in nodes of 2 to 7 references raised the
+  // cost slightly (Conference 104.90 without them, 104.91 with, at 1.049 references per
+  // triangle instead of 1.063) and took about a third of the build. 0 tries them everywhere.
+  uint32_t spatial_from = 8;
   // Object splits are binned by box centre: a node of n references uses
   // clamp(n / 256, object_bins, 128) bins, at most 4 + n / 5 (as the binned builder).
   uint32_t object_bins = 32;  // 2 to 128
@@ -30,7 +38,7 @@ struct SpatialSplitParams {
   // every node, against 47.85 binned), though alone it is the sweep builder's lower cost.
   uint32_t exact_sweep_below = 0;
   // Nodes with at least this many references bin and partition in parallel.
-  uint32_t parallel_binning_threshold = 65536;
+  uint32_t parallel_binning_threshold = 8192;
 };
 
 struct SpatialSplitConfig : BuilderConfig, SpatialSplitParams {};
@@ -62,14 +70,16 @@ struct SpatialSplitResult {
 };
 
 // Each node takes the cheaper of the best object split (binned over box centres) and, when
-// its boxes overlap by more than alpha, the best spatial split: binned over the node's box,
-// where a reference crossing bins is cut by clipping its triangle exactly (Sutherland-
-// Hodgman, triangle_clipping.h) against each bin's slab and intersecting with its box. A
-// crossing reference of the chosen spatial split goes whole to one side when that is
-// cheaper (the paper's reference unsplitting). Each subtree owns a fixed range of
-// reference slots whose spare room is shared between the children by their counts, so the
-// budget holds without any shared counter, and the tree is the same on any number of
-// threads. Leaf boxes and inner boxes are refitted to the final references.
+// its boxes overlap by more than alpha and it holds at least spatial_from references, the
+// best spatial split: binned over the node's box, where a reference crossing bins adds to
+// each bin its triangle's piece in that slab (bounded in float: the bins only estimate the
+// cost). The chosen split cuts its crossing references exactly (slice_triangle,
+// triangle_clipping.h) and intersects each piece with the reference's box; a crossing
+// reference goes whole to one side when that is cheaper (the paper's reference
+// unsplitting). Each subtree owns a fixed range of reference slots whose spare room is
+// shared between the children by their counts, so the budget holds without any shared
+// counter, and the tree is the same on any number of threads. Leaf boxes and inner boxes
+// are refitted to the final references.
 SpatialSplitResult build_spatial_split(const Mesh& mesh, const PrimitiveRefs& refs,
                                        const SpatialSplitConfig& config = {});
 

@@ -28,6 +28,16 @@ struct ClipPolygon {
 // only when its ends lie strictly on opposite sides.
 void split_polygon(const ClipPolygon& in, int axis, double pos, ClipPolygon& below, ClipPolygon& above);
 
+// The triangle cut by `count` planes on `axis` (non-decreasing positions): pieces[0] gets
+// the bounds of the part below planes[0], pieces[k] of the part between planes[k - 1] and
+// planes[k], pieces[count] of the part above planes[count - 1]; `pieces` holds count + 1
+// boxes. Each piece is bounded as split_polygon would bound it (corners on a plane belong
+// to both sides, the cut points of one plane computed the same way, rounded outward to
+// float), but from the triangle's edges directly rather than by clipping a polygon plane
+// after plane: the cost is a few binary searches and the cut points, not a polygon per
+// piece. An empty box is a piece the triangle misses.
+void slice_triangle(const Triangle& t, int axis, const float* planes, int count, Box* pieces);
+
 // Bounds of t ∩ {lo <= p[axis] <= hi}; empty when the triangle misses the slab.
 Box clip_triangle_to_slab(const Triangle& t, int axis, float lo, float hi);
 

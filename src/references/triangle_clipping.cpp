@@ -2,21 +2,33 @@
 // double, and a cut point is then far more accurate than the float box that bounds it).
 #include "bvhopt/triangle_clipping.h"
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 namespace bvhopt {
 namespace {
 
 // The float nearest below (above) a double, so a box rounded this way never loses any of
-// the polygon it bounds.
+// the polygon it bounds. The step to the neighbouring float is taken on the bits: the
+// builder's hot loop rounds millions of points, and the step only ever goes toward d (an
+// infinity that overflowed steps to the largest float, never past infinity).
+float float_below(float f) {
+  if (f == 0.0f) return -std::numeric_limits<float>::denorm_min();
+  uint32_t bits = std::bit_cast<uint32_t>(f);
+  bits = f > 0.0f ? bits - 1 : bits + 1;
+  return std::bit_cast<float>(bits);
+}
+float float_above(float f) { return -float_below(-f); }
 float round_down(double d) {
-  float f = static_cast<float>(d);
-  return static_cast<double>(f) > d ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
+  const float f = static_cast<float>(d);
+  return static_cast<double>(f) > d ? float_below(f) : f;
 }
 float round_up(double d) {
-  float f = static_cast<float>(d);
-  return static_cast<double>(f) < d ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+  const float f = static_cast<float>(d);
+  return static_cast<double>(f) < d ? float_above(f) : f;
 }
 
 void push(ClipPolygon& poly, const double* q) {
@@ -36,6 +48,42 @@ void push_cut(ClipPolygon& poly, const double* a, const double* b, int axis, dou
 }
 
 }  // namespace
+
+void slice_triangle(const Triangle& t, int axis, const float* planes, int count, Box* pieces) {
+  const Vec3 v[3] = {t.v0, t.v1, t.v2};
+  for (int k = 0; k <= count; ++k) pieces[k] = Box();
+  const float* end = planes + count;
+  // A corner lies in each piece whose slab holds it: two or more when it is on a plane.
+  for (const Vec3& c : v) {
+    const long first = std::lower_bound(planes, end, c[axis]) - planes;
+    const long last = std::upper_bound(planes, end, c[axis]) - planes;
+    for (long k = first; k <= last; ++k) pieces[k].extend(c);
+  }
+  // Each edge crossing a plane strictly gives the point where it does to the pieces on both
+  // sides of that plane, computed as split_polygon computes it on the whole triangle.
+  for (int e = 0; e < 3; ++e) {
+    const Vec3& a = v[e];
+    const Vec3& b = v[e == 2 ? 0 : e + 1];
+    const float lo = std::min(a[axis], b[axis]), hi = std::max(a[axis], b[axis]);
+    const long first = std::upper_bound(planes, end, lo) - planes;
+    const long last = std::lower_bound(planes, end, hi) - planes;  // one past
+    if (first >= last) continue;
+    const double pa[3] = {a.x, a.y, a.z}, pb[3] = {b.x, b.y, b.z};
+    for (long j = first; j < last; ++j) {
+      const double pos = planes[j];
+      const double s = (pos - pa[axis]) / (pb[axis] - pa[axis]);
+      Vec3 lo_q, hi_q;
+      for (int k = 0; k < 3; ++k) {
+        const double q = k == axis ? pos : pa[k] + s * (pb[k] - pa[k]);
+        lo_q[k] = round_down(q);
+        hi_q[k] = round_up(q);
+      }
+      const Box q(lo_q, hi_q);
+      pieces[j].extend(q);
+      pieces[j + 1].extend(q);
+    }
+  }
+}
 
 ClipPolygon::ClipPolygon(const Triangle& t) : count(3) {
   const Vec3* v[3] = {&t.v0, &t.v1, &t.v2};
