@@ -11,6 +11,20 @@ void add_budget_option(CLI::App* app, SpatialSplitParams& params) {
       ->check(finite_number())
       ->check(CLI::Range(1.0, 64.0))
       ->capture_default_str();
+  app->add_option("--split-alpha", params.alpha,
+                  "sbvh: try spatial splits where the object split's children overlap by more than this "
+                  "fraction of the root's area (Stich et al.'s alpha; 0: everywhere)")
+      ->check(finite_number())
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  app->add_option("--spatial-bins", params.spatial_bins,
+                  "sbvh: most bins per axis for spatial splits (a node of n references uses at most 4 + n/2)")
+      ->check(whole_number(kMinBinCount, kMaxBinCount))
+      ->capture_default_str();
+  app->add_option("--spatial-from", params.spatial_from,
+                  "sbvh: nodes of fewer references take object splits only (0: spatial splits everywhere)")
+      ->check(whole_number(0, kMaxReferences))
+      ->capture_default_str();
 }
 
 void SceneBuilderOption::add_to(CLI::App* app) {

@@ -62,7 +62,8 @@ struct EvhOption {
   PrimitiveRefs make_refs(const Mesh& mesh, std::string* report = nullptr) const;
 };
 
-// --budget R: the sbvh builder's most references per triangle (SpatialSplitParams::budget).
+// The sbvh builder's settings (SpatialSplitParams): --budget R (most references per
+// triangle), --split-alpha A, --spatial-bins N and --spatial-from N.
 void add_budget_option(CLI::App* app, SpatialSplitParams& params);
 
 // --builder NAME [--budget R] for the commands that build a scene to optimize it (bake,

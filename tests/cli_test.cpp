@@ -67,6 +67,30 @@ TEST_F(Cli, ExplicitBinCountIsHonoured) {
   EXPECT_FALSE(fs::exists(dir_ / "x.bvh"));
 }
 
+// The sbvh builder's settings reach it: spatial splits everywhere (--spatial-from 0), none
+// (--split-alpha 1: no overlap is that large) and a few bins each give another tree than the
+// defaults; values outside their ranges are refused by name.
+TEST_F(Cli, SbvhSettingsAreHonoured) {
+  auto build_with = [&](const std::string& options) {
+    CliRun r = run("build 'builtin?triangles=4000' --builder sbvh " + options + " --json -o " + (dir_ / "s.bvh").string());
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return r.exit_code == 0 ? nlohmann::json::parse(r.out) : nlohmann::json{{"cost", -1.0}, {"references", 0}};
+  };
+  const nlohmann::json defaults = build_with(""), everywhere = build_with("--spatial-from 0"),
+                       none = build_with("--split-alpha 1"), few_bins = build_with("--spatial-bins 2");
+  const size_t triangles = defaults["triangles"].get<size_t>();
+  EXPECT_GT(defaults["references"].get<size_t>(), triangles);  // the default does split
+  EXPECT_EQ(none["references"].get<size_t>(), triangles);      // alpha 1 never does
+  EXPECT_NE(everywhere["cost"].get<double>(), defaults["cost"].get<double>());
+  EXPECT_NE(few_bins["cost"].get<double>(), defaults["cost"].get<double>());
+  for (const std::string bad : {"--spatial-bins 1", "--spatial-bins 129", "--split-alpha nan", "--split-alpha -1",
+                                "--spatial-from -1"}) {
+    CliRun r = run("build builtin --builder sbvh " + bad + " -o " + (dir_ / "x.bvh").string());
+    EXPECT_EQ(r.exit_code, 2) << bad;
+    EXPECT_NE(r.err.find(bad.substr(0, bad.find(' '))), std::string::npos) << r.err;
+  }
+}
+
 TEST_F(Cli, UnknownBuilderIsRejected) {
   CliRun r = run("build builtin --builder fastest -o " + (dir_ / "x.bvh").string());
   EXPECT_NE(r.exit_code, 0);
