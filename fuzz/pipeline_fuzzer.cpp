@@ -15,15 +15,15 @@
 
 #include "bvhopt/build.h"
 #include "bvhopt/collapse_leaves.h"
-#include "bvhopt/edge_volume_subdivision.h"
-#include "bvhopt/leaf_dedup.h"
-#include "bvhopt/triangle_cost.h"
 #include "bvhopt/cost.h"
+#include "bvhopt/edge_volume_subdivision.h"
 #include "bvhopt/finalize.h"
 #include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/leaf_dedup.h"
 #include "bvhopt/references.h"
 #include "bvhopt/tracer.h"
 #include "bvhopt/tree_rotations.h"
+#include "bvhopt/triangle_cost.h"
 #include "bvhopt/validate.h"
 #include "bvhopt/testing/brute_force.h"
 
