@@ -253,6 +253,28 @@ TEST_F(BadInput, PlyAsciiLinesHoldNoControlBytes) {
             2u);
 }
 
+// Assimp reads a header word only up to a blank, and did not see "end_header\v": it read on
+// for ever (found by fuzzing). Header lines hold no control byte but tabs and a final CR.
+TEST_F(BadInput, PlyHeaderLinesHoldNoControlBytes) {
+  const std::string elements =
+      "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 1\nproperty list uchar int vertex_indices\n";
+  const std::string data = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  expect_rejected(write("vtab_end.ply", "ply\nformat ascii 1.0\n" + elements + "end_header\v\n" + data),
+                  {"header line 9: control byte 11"});
+  expect_rejected(write("vtab_empty.ply", "ply\nformat ascii 1.0\nend_header\v5 0 0\n"),
+                  {"header line 3: control byte 11"});
+  expect_rejected(write("cr_inside.ply", "ply\nformat ascii\r1.0\n" + elements + "end_header\n" + data),
+                  {"header line 2: control byte 13"});
+  expect_rejected(write("nul_header.ply", "ply\nformat ascii 1.0\n" + elements + std::string("comment a\0b\n", 12) +
+                                              "end_header\n" + data),
+                  {"header line 9: control byte 0"});
+  EXPECT_EQ(load_mesh_file(write("tabs_and_crlf_header.ply", "ply\r\nformat\tascii 1.0\r\n" + elements +
+                                                              "end_header\t\r\n" + data))
+                .triangle_count(),
+            1u);
+}
+
 // Messages show the file's text with control bytes escaped, and a negative count as
 // written, not as 2^64 minus it.
 TEST_F(BadInput, PlyMessagesShowNoRawBytesAndNoWrappedCounts) {
