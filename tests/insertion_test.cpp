@@ -2,6 +2,8 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <bit>
+#include <set>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -13,12 +15,65 @@
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/validate.h"
+#include "optimize/largest_keys.h"
 #include "optimize/reinsertion_search.h"
 #include "optimize/undo_log.h"
 #include "test_support.h"
 
 namespace bvhopt {
 namespace {
+
+// The selection's shortcuts (every key of a small array; one scan that also gathers the
+// keys; a second scan when the threshold falls below the last pass's guess or the gathering
+// overflows) each give exactly the k largest keys a full sort gives, pass after pass while
+// the keys drift down and jump up.
+TEST(LargestKeys, EveryPathGivesTheKLargestAsAFullSortDoes) {
+  using detail::LargestKeys;
+  using Path = LargestKeys::Path;
+  std::mt19937_64 rng(11);
+  std::vector<uint64_t> keys;
+  std::vector<char> member;
+  auto make = [&](size_t count, float lo, float hi) {
+    keys.assign(count, 0);
+    member.assign(count, 0);
+    std::uniform_real_distribution<float> value(lo, hi);
+    for (size_t i = 0; i < count; ++i) {
+      member[i] = rng() % 3 != 0;  // like leaves between inner nodes
+      keys[i] = (uint64_t{std::bit_cast<uint32_t>(value(rng))} << 32) | (0xffffffffu - i);
+    }
+  };
+  LargestKeys selection;
+  std::set<Path> paths;
+  auto check = [&](size_t k) {
+    std::vector<uint64_t> got;
+    const Path path = selection.largest(
+        keys.size(), k, [&](size_t i) { return member[i] != 0; }, [&](size_t i) { return keys[i]; }, got);
+    paths.insert(path);
+    std::vector<uint64_t> expected;
+    for (size_t i = 0; i < keys.size(); ++i)
+      if (member[i]) expected.push_back(keys[i]);
+    std::sort(expected.begin(), expected.end(), std::greater<uint64_t>());
+    expected.resize(std::min(k, expected.size()));
+    EXPECT_EQ(got, expected) << "k " << k << ", " << keys.size() << " entries";
+    return path;
+  };
+  const size_t big = 3 * LargestKeys::kBuckets + 17;
+  make(big, 1.0f, 2.0f);
+  EXPECT_EQ(check(1000), Path::two_scans);  // no guess yet
+  make(big, 1.0f, 2.0f);
+  EXPECT_EQ(check(1000), Path::one_scan);   // keys drift a little: the guess holds
+  EXPECT_EQ(check(1), Path::two_scans);     // a guess for k = 1000 gathers more than 4k keys
+  make(big, 1e-3f, 2e-3f);
+  EXPECT_EQ(check(1000), Path::two_scans);  // keys fall below the guess
+  make(big, 1e3f, 2e3f);
+  EXPECT_EQ(check(1000), Path::two_scans);  // every key above the guess: the gathering overflows
+  EXPECT_EQ(check(big), Path::two_scans);   // k beyond the members: all of them
+  make(LargestKeys::kBuckets, 1.0f, 2.0f);
+  EXPECT_EQ(check(50), Path::all_keys);
+  make(0, 1.0f, 2.0f);
+  EXPECT_EQ(check(5), Path::all_keys);
+  EXPECT_EQ(paths.size(), 3u);
+}
 
 Bvh build_start(const PrimitiveRefs& refs, int kind) {
   switch (kind % 3) {

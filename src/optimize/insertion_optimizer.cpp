@@ -1,11 +1,9 @@
 #include "bvhopt/insertion_optimizer.h"
 
 #include <tbb/blocked_range.h>
-#include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <atomic>
 #include <bit>
 #include <cmath>
 #include <functional>
@@ -15,6 +13,7 @@
 #include "bvhopt/random_stream.h"
 #include "bvhopt/testing/insertion_hooks.h"
 #include "optimize/find_by_name.h"
+#include "optimize/largest_keys.h"
 #include "optimize/pass_driver.h"
 #include "optimize/reinsertion_search.h"
 #include "optimize/node_set.h"
@@ -193,11 +192,11 @@ class InsertionOptimizer {
       }
       return;
     }
-    collect_largest_keys(k);
-    std::nth_element(keys_.begin(), keys_.begin() + (k - 1), keys_.end(), std::greater<uint64_t>());
-    std::sort(keys_.begin(), keys_.begin() + k, std::greater<uint64_t>());
-    for (size_t i = 0; i < k; ++i) {
-      const uint32_t n = 0xffffffffu - static_cast<uint32_t>(keys_[i]);
+    largest_.largest(
+        bvh_.nodes.size(), k, [&](size_t i) { return !bvh_.nodes[i].is_leaf(); },
+        [&](size_t i) { return key(static_cast<uint32_t>(i)); }, keys_);
+    for (uint64_t kk : keys_) {
+      const uint32_t n = 0xffffffffu - static_cast<uint32_t>(kk);
       if (n != bvh_.root) out.push_back(n);
     }
   }
@@ -209,76 +208,6 @@ class InsertionOptimizer {
     const float m = n == bvh_.root ? 0.0f : static_cast<float>(measure(n));
     return (static_cast<uint64_t>(std::bit_cast<uint32_t>(m)) << 32) | (0xffffffffu - n);
   }
-
-  // Leaves in keys_ the keys of (at least) the k largest: a histogram of the keys' top 16
-  // bits finds the bucket that holds the k-th, and only keys from that bucket up are kept,
-  // so the scratch is about k keys, not one per node (8 bytes a node on a huge tree).
-  // A tree with fewer nodes than buckets keeps every key instead: the histogram's fixed
-  // 2^16 steps would be most of a pass there (a few hundred nodes), and its keys fit in
-  // less scratch than the histogram.
-  // The threshold moves little from pass to pass: the histogram's own scan also gathers the
-  // keys from a guess below the last pass's threshold, so a second scan of the node array is
-  // needed only when the threshold falls below the guess.
-  void collect_largest_keys(size_t k) {
-    const size_t count = bvh_.nodes.size();
-    if (count <= kBuckets) {
-      keys_.clear();
-      for (size_t i = 0; i < count; ++i)
-        if (!bvh_.nodes[i].is_leaf()) keys_.push_back(key(static_cast<uint32_t>(i)));
-      return;
-    }
-    tbb::combinable<std::vector<uint32_t>> local([] { return std::vector<uint32_t>(kBuckets, 0); });
-    tbb::combinable<std::vector<uint64_t>> gathered;
-    const size_t guess = guess_;
-    // A threshold that jumps up would gather far more than 3k keys: past 4k the gathering
-    // stops and the second scan runs, so the scratch stays about k keys.
-    std::atomic<bool> overflow = false;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 16384), [&](const tbb::blocked_range<size_t>& r) {
-      std::vector<uint32_t>& h = local.local();
-      std::vector<uint64_t>& out = gathered.local();
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        if (bvh_.nodes[i].is_leaf()) continue;
-        const uint64_t kk = key(static_cast<uint32_t>(i));
-        ++h[bucket(kk)];
-        if (bucket(kk) < guess || overflow.load(std::memory_order_relaxed)) continue;
-        if (out.size() >= 4 * k) overflow = true;
-        out.push_back(kk);
-      }
-    });
-    histogram_.assign(kBuckets, 0);
-    local.combine_each([&](const std::vector<uint32_t>& h) {
-      for (size_t b = 0; b < kBuckets; ++b) histogram_[b] += h[b];
-    });
-    size_t first = kBuckets, above = 0;
-    while (first > 0 && above < k) above += histogram_[--first];
-    // The next guess: the lowest bucket with at most 3k keys from it up in this pass.
-    size_t next = first, upto = above;
-    while (next > 0 && upto + histogram_[next - 1] <= 3 * k) upto += histogram_[--next];
-    guess_ = next;
-    keys_.clear();
-    keys_.reserve(above);
-    // Integer counts: the same threshold on any thread count; the kept set is then sorted by
-    // key, so the order it was gathered in does not matter.
-    if (first >= guess && !overflow) {
-      gathered.combine_each([&](const std::vector<uint64_t>& part) {
-        for (uint64_t kk : part)
-          if (bucket(kk) >= first) keys_.push_back(kk);
-      });
-      return;
-    }
-    tbb::combinable<std::vector<uint64_t>> kept;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 16384), [&](const tbb::blocked_range<size_t>& r) {
-      std::vector<uint64_t>& out = kept.local();
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        if (bvh_.nodes[i].is_leaf()) continue;
-        const uint64_t kk = key(static_cast<uint32_t>(i));
-        if (bucket(kk) >= first) out.push_back(kk);
-      }
-    });
-    kept.combine_each([&](const std::vector<uint64_t>& part) { keys_.insert(keys_.end(), part.begin(), part.end()); });
-  }
-  static constexpr size_t kBuckets = size_t{1} << 16;
-  static size_t bucket(uint64_t key) { return static_cast<size_t>(key >> 48); }
 
   // The paper's step 2 for one node: remove N and its parent, reinsert both children
   // (larger first) at the best places in the tree as it is after the removal.
@@ -501,8 +430,7 @@ class InsertionOptimizer {
   std::vector<uint32_t> path_;
   size_t inner_count_ = 0;
   std::vector<uint64_t> keys_;
-  std::vector<uint64_t> histogram_;
-  size_t guess_ = size_t{1} << 16;  // lowest bucket whose keys the histogram's scan gathers
+  detail::LargestKeys largest_;
   std::vector<Plan> plans_;
   detail::NodeSet touched_;  // nodes a move of this parallel pass changed
   detail::UndoLog undo_;
