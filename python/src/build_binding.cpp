@@ -34,7 +34,8 @@ std::optional<EdgeVolumeConfig> evh_config(const py::object& evh) {
 }
 
 Tree build(const Scene& scene, const std::string& builder, uint32_t leaf_size, double c_t, double c_i,
-           std::optional<int> threads, const py::object& evh, std::optional<uint32_t> bins, double budget) {
+           std::optional<int> threads, const py::object& evh, std::optional<uint32_t> bins, double budget,
+           double split_alpha, uint32_t spatial_bins, uint32_t spatial_from) {
   BuildOptions options;
   const auto kind = parse_builder(builder);
   if (!kind) throw Error("build: unknown builder '" + builder + "' (known: " + known_builders() + ")");
@@ -46,6 +47,9 @@ Tree build(const Scene& scene, const std::string& builder, uint32_t leaf_size, d
     options.binned.refs_per_bin = 0;
   }
   options.sbvh.budget = budget;
+  options.sbvh.alpha = split_alpha;
+  options.sbvh.spatial_bins = spatial_bins;
+  options.sbvh.spatial_from = spatial_from;
   validate(options);
   const std::optional<EdgeVolumeConfig> subdivide = evh_config(evh);
   Tree tree;
@@ -77,9 +81,12 @@ void register_build(py::module_& m) {
   m.def("build", &build, py::arg("scene"), py::arg("builder") = "sweep", py::arg("leaf_size") = 1,
         py::arg("c_t") = 3.0, py::arg("c_i") = 2.0, py::arg("threads") = py::none(), py::arg("evh") = py::none(),
         py::arg("bins") = py::none(), py::arg("budget") = SpatialSplitParams{}.budget,
+        py::arg("split_alpha") = SpatialSplitParams{}.alpha, py::arg("spatial_bins") = SpatialSplitParams{}.spatial_bins,
+        py::arg("spatial_from") = SpatialSplitParams{}.spatial_from,
         "Builds a BVH top-down: builder 'sweep' | 'binned' | 'spatial-median' | 'object-median' | 'sbvh' "
-        "(spatial splits, at most budget x triangles references); evh=True (or the exponent t) subdivides fat "
-        "triangles first. The tree does not depend on threads.");
+        "(spatial splits, at most budget x triangles references; split_alpha, spatial_bins and spatial_from as "
+        "the command line's --split-alpha, --spatial-bins and --spatial-from); evh=True (or the exponent t) "
+        "subdivides fat triangles first. The tree does not depend on threads.");
   m.def("load", &load, py::arg("path"), "Reads a BVH file written by Bvh.save or the command line");
   m.def("builders", [] {
     py::list names;

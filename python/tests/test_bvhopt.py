@@ -51,6 +51,17 @@ def test_build_cost_equals_the_command_line(cli, tmp_path, scene, builder):
     np.testing.assert_array_equal(bvhopt.load(tmp_path / "a.bvh").nodes, bvhopt.load(tmp_path / "b.bvh").nodes)
 
 
+@pytest.mark.parametrize("option,value", [("budget", 1.1), ("split_alpha", 1.0), ("spatial_bins", 2),
+                                          ("spatial_from", 0)])
+def test_sbvh_settings_equal_the_command_line(cli, tmp_path, scene, option, value):
+    flag = "--" + option.replace("_", "-")
+    ref = run_cli(cli, "build", SCENE, "--builder", "sbvh", flag, str(value), "-o", str(tmp_path / "a.bvh"))
+    bvh = bvhopt.build(scene, builder="sbvh", **{option: value})
+    assert bvh.cost == ref["cost"] and bvh.stats()["nodes"] == ref["nodes"]
+    # Each setting changes the tree, so a binding that dropped it would fail above or here.
+    assert bvh.cost != bvhopt.build(scene, builder="sbvh").cost
+
+
 @pytest.mark.parametrize("method,args", [("insertion", []), ("hill-climb", []),
                                          ("anneal", ["--schedule-passes", "60"])])
 def test_optimize_equals_the_command_line(cli, tmp_path, scene, method, args):
@@ -161,6 +172,9 @@ def test_interrupt_keeps_the_best_tree_so_far(scene):
     (lambda s: bvhopt.build(s, leaf_size=0), "leaf"),
     (lambda s: bvhopt.build(s, threads=0), "threads"),
     (lambda s: bvhopt.build(s, evh=99), "0..62"),
+    (lambda s: bvhopt.build(s, builder="sbvh", spatial_bins=1), "spatial_bins"),
+    (lambda s: bvhopt.build(s, builder="sbvh", split_alpha=float("nan")), "alpha"),
+    (lambda s: bvhopt.build(s, builder="sbvh", budget=0.5), "budget"),
     (lambda s: bvhopt.build(s).optimize("annealing"), "unknown method 'annealing'"),
     (lambda s: bvhopt.build(s).optimize("insertion", h=2), "has no option 'h'"),
     (lambda s: bvhopt.build(s).optimize("insertion", form="diagonal"), "unknown form 'diagonal'"),
