@@ -358,6 +358,23 @@ TEST_F(BadInput, GltfAccessorPastItsBufferViewIsRefused) {
   expect_rejected(write("short.gltf", short_data), {"buffer 0", "byteLength 48 but only 44 bytes of data"});
 }
 
+// Found by fuzz/scene_file_fuzzer: an accessor whose type is not a string made the pre-check
+// throw nlohmann's type error, which no caller expects (the fuzzer's process ended). Each
+// field of the wrong JSON type is the file's error, named.
+TEST_F(BadInput, GltfFieldsOfTheWrongJsonTypeAreRefused) {
+  const std::string head =
+      R"({"asset":{"version":"2.0"},"buffers":[{"uri":"data:application/octet-stream;base64,AAAAAAAAAAAAAAAA",)"
+      R"("byteLength":12}],"bufferViews":[{"buffer":0,"byteLength":12}],"accessors":[{"bufferView":0,)"
+      R"("componentType":5126,"count":1,"type":)";
+  expect_rejected(write("type_array.gltf", head + R"(["VEC3"]}]})"), {"accessor 0", "unknown type [\"VEC3\"]"});
+  expect_rejected(write("type_number.gltf", head + R"(3}]})"), {"accessor 0", "unknown type 3"});
+  expect_rejected(write("count_string.gltf", head + R"("VEC3","count":"1"}]})"), {"accessor 0", "count"});
+  expect_rejected(write("view_string.gltf",
+                        R"({"asset":{"version":"2.0"},"accessors":[{"bufferView":"0","componentType":5126,"count":1,)"
+                        R"("type":"VEC3"}]})"),
+                  {"bufferView '0' does not exist"});
+}
+
 TEST_F(BadInput, GoodFileStillLoads) {
   // The control: the same writer and loader accept a well-formed file, degenerate
   // triangle included.

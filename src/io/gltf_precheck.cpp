@@ -142,7 +142,10 @@ uint64_t component_bytes(const Json& accessor, const std::string& what) {
 }
 
 uint64_t component_count(const Json& accessor, const std::string& what) {
-  const std::string type = accessor.value("type", std::string());
+  // value("type", std::string()) would throw nlohmann's type error on a non-string type
+  // (found by fuzz/scene_file_fuzzer: "type":[...] ended the program).
+  const auto it = accessor.find("type");
+  const std::string type = it != accessor.end() && it->is_string() ? it->get<std::string>() : std::string();
   static const std::pair<const char*, uint64_t> kTypes[] = {{"SCALAR", 1}, {"VEC2", 2}, {"VEC3", 3}, {"VEC4", 4},
                                                              {"MAT2", 4},   {"MAT3", 9}, {"MAT4", 16}};
   for (const auto& [name, n] : kTypes)
@@ -231,7 +234,13 @@ void check_gltf(const std::filesystem::path& path, const std::string& where) {
     }
   }
   if (!named && !(content.json.is_object() && content.json.contains("asset"))) return;
-  check_json(content, path, where);
+  // Every field is read after checking its JSON type; a read that missed the check still
+  // becomes this file's error, not an exception the caller cannot place.
+  try {
+    check_json(content, path, where);
+  } catch (const Json::exception& e) {
+    throw Error(where + ": glTF: a value of the wrong JSON type (" + std::string(e.what()) + ")");
+  }
 }
 
 }  // namespace bvhopt
