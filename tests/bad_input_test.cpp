@@ -275,6 +275,14 @@ TEST_F(BadInput, PlyHeaderLinesHoldNoControlBytes) {
             1u);
 }
 
+// Found by fuzzing: elements without properties walked on past the end of the data.
+TEST_F(BadInput, PlyElementsWithoutPropertiesStillNeedTheirLines) {
+  expect_rejected(write("bare_elements.ply", "ply\nformat ascii 1.0\nelement e 4\nend_header"),
+                  {"truncated: the data ends in e 0 of 4"});
+  expect_rejected(write("bare_elements_short.ply", "ply\nformat ascii 1.0\nelement e 4\nend_header\n\n\n"),
+                  {"truncated: the data ends in e 2 of 4"});
+}
+
 // Messages show the file's text with control bytes escaped, and a negative count as
 // written, not as 2^64 minus it.
 TEST_F(BadInput, PlyMessagesShowNoRawBytesAndNoWrappedCounts) {

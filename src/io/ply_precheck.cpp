@@ -143,6 +143,12 @@ void check_ascii_ply(const std::vector<char>& data, const PlyHeader& h, const st
                    std::to_string(e.count));
     };
     for (uint64_t i = 0; i < e.count; ++i) {
+      // Every element takes a line, one with no properties too: none left is a cut file
+      // (found by fuzz/scene_file_fuzzer: such elements walked on past the data's end).
+      if (at >= data.size()) {
+        line_end = data.size();
+        throw short_by(i);
+      }
       line_end = at;
       while (line_end < data.size() && data[line_end] != '\n') ++line_end;
       for (size_t c = at; c < line_end; ++c) {
