@@ -10,16 +10,19 @@
 // room for --embree-budget times the references), both on --threads threads, timed
 // interleaved in the same run (median of --runs, wall and process CPU time): references
 // per second and per triangle, cost and ocost (counting each triangle once per leaf);
-// then our tree after insertion optimization (to convergence, or --opt-seconds) and its
-// ocost, beside the best split peer figures (tinybvh BuildHQ + Optimize(50,
-// extreme), or Embree HIGH; c_T = 3, c_I = 2).
+// then our tree after insertion optimization (to convergence, or --opt-seconds) and the
+// ocost of bake --quality best (the lower of two starts: that tree collapsed, and the
+// SBVH with SAH leaves of up to 8 optimized and collapsed), beside the best split
+// peer figures (tinybvh BuildHQ + Optimize(50, extreme), or Embree HIGH; c_T = 3, c_I = 2).
 //
 // --compare: the edge volume heuristic beside spatial splits, per scene unrotated and
 // rotated by (30, 30, 0): sweep, sweep + EVH, SBVH and SBVH + EVH, each built (median of
 // --runs) and then optimized by insertion (--opt-seconds each, default 20): references per
 // triangle, cost, build time and rays per second of the optimized tree in the bvh8 layout
 // (primary and random rays made once per scene from the sweep tree, the same for all four;
-// median of 3 passes, process CPU time over the thread count).
+// --ray-threads threads, default 1; the four traced in turn, pass after pass, median of
+// --ray-passes passes, default 11, process CPU time over the thread count, with the
+// passes' interquartile range).
 #ifdef BVHOPT_HAVE_EMBREE
 #include <embree3/rtcore.h>
 
@@ -88,6 +91,8 @@ struct Options {
   bool compare = false;
   std::vector<float> rotations{0.0f, 30.0f};
   uint64_t rays = 200000;
+  int ray_passes = 11;
+  int ray_threads = 1;
   std::string json_path;
 };
 
@@ -105,6 +110,8 @@ Options parse(int argc, char** argv) {
     else if (a == "--no-embree") o.embree = false;
     else if (a == "--compare") o.compare = true;
     else if (a == "--rays") o.rays = std::stoull(args.value());
+    else if (a == "--ray-passes") o.ray_passes = std::max(1, std::stoi(args.value()));
+    else if (a == "--ray-threads") o.ray_threads = std::max(1, std::stoi(args.value()));
     else if (a == "--rotate") {
       o.rotations.clear();
       for (auto& r : split_list(args.value())) o.rotations.push_back(std::stof(r));
@@ -112,7 +119,8 @@ Options parse(int argc, char** argv) {
     else if (a == "--help" || a == "-h") {
       std::cout << "sbvh_bench [--scenes DIR] [--scene FILE]... [--runs 5] [--threads 2] [--budget 1.3]\n"
                    "           [--embree-budget 1.5] [--opt-seconds S] [--no-embree] [--json FILE]\n"
-                   "sbvh_bench --compare [--rotate 0,30] [--rays N] [--opt-seconds 20] ...\n";
+                   "sbvh_bench --compare [--rotate 0,30] [--rays N] [--ray-passes 11] [--ray-threads 1]\n"
+                   "           [--opt-seconds 20] ...\n";
       std::exit(0);
     } else {
       throw Error("sbvh_bench: unknown option '" + a + "' (try --help)");
@@ -289,7 +297,15 @@ nlohmann::json run_scene(const Options& opt, const std::string& spec) {
   if (opt.opt_seconds > 0) ic.limits.time_limit = opt.opt_seconds;
   const OptimizeReport rep = optimize_insertion(ours.bvh, ic);
   const double cost_opt = sah_cost(ours.bvh, ours.refs, cost);
-  const double ocost_opt = optimal_collapse_cost(ours.bvh, ours.refs, cost);
+  const double ocost_one = optimal_collapse_cost(ours.bvh, ours.refs, cost);
+  // bake --quality best's second start: the SBVH's own SAH leaves of up to 8, optimized by
+  // insertion, then collapsed; best keeps the cheaper of the two collapsed trees.
+  SpatialSplitConfig leafy = config;
+  leafy.leaf.max_leaf_size = 8;
+  SpatialSplitResult eight = build_spatial_split(mesh, refs, leafy);
+  const OptimizeReport rep8 = optimize_insertion(eight.bvh, ic);
+  const double ocost_eight = optimal_collapse_cost(eight.bvh, eight.refs, cost);
+  const double ocost_opt = std::min(ocost_one, ocost_eight);
 
   const double wall = median(ours_wall), cpu = median(ours_cpu);
   const double pwall = median(peer_wall), pcpu = median(peer_cpu);
@@ -313,8 +329,11 @@ nlohmann::json run_scene(const Options& opt, const std::string& spec) {
           {"cost", cost_built},
           {"ocost", ocost_built},
           {"optimized_cost", cost_opt},
-          {"optimized_ocost", ocost_opt},
+          {"optimized_ocost", ocost_one},
           {"optimize_seconds", rep.seconds},
+          {"leaf8_optimized_ocost", ocost_eight},
+          {"leaf8_optimize_seconds", rep8.seconds},
+          {"best_ocost", ocost_opt},
           {"embree_high",
            {{"refs_per_triangle", have_peer ? peer.refs.size() / tris : 0.0},
             {"build_seconds", pwall},
@@ -344,7 +363,9 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
                               {"sweep+evh", BuilderKind::sweep_sah, true},
                               {"sbvh", BuilderKind::spatial_split, false},
                               {"sbvh+evh", BuilderKind::spatial_split, true}};
+  constexpr size_t kVariants = std::size(variants);
   std::vector<Ray> rays[2];
+  std::vector<std::unique_ptr<WideTracer>> tracers;
   nlohmann::json out = nlohmann::json::array();
   for (const Variant& v : variants) {
     BuildOptions bo;
@@ -376,31 +397,54 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     }
     WideTracerOptions wo;
     wo.layout.collapse.width = 8;
-    const WideTracer wide(flat, mesh, wo);
-    double mrays[2];
-    for (int k = 0; k < 2; ++k) {
-      std::vector<double> rates;
-      for (int rep_i = 0; rep_i < 3; ++rep_i) {
-        const double c0 = process_cpu_seconds();
-        const RayMeasurement m = measure_rays(AnyTracer(wide), rays[k], RayQuery::closest, {.repeats = 1});
-        const double cpu = (process_cpu_seconds() - c0) / double(opt.threads);
-        rates.push_back(cpu > 0 ? double(m.rays) / cpu : m.rays_per_second);
-      }
-      mrays[k] = median(rates) * 1e-6;
-    }
-    std::printf("%-22s %-10s %7.3f %9.1f %9.2f %9.2f %8.1f %9.2f %9.2f\n", name.c_str(), v.name,
-                tree.refs.size() / tris, median(walls) * 1e3, built, optimized, rep.seconds, mrays[0], mrays[1]);
-    std::fflush(stdout);
+    tracers.push_back(std::make_unique<WideTracer>(flat, mesh, wo));
     out.push_back({{"scene", name},
                    {"variant", v.name},
                    {"refs_per_triangle", tree.refs.size() / tris},
                    {"build_seconds", median(walls)},
                    {"cost", built},
                    {"optimized_cost", optimized},
-                   {"optimize_seconds", rep.seconds},
-                   {"primary_mrays", mrays[0]},
-                   {"random_mrays", mrays[1]}});
+                   {"optimize_seconds", rep.seconds}});
   }
+  // The four trees are traced in turn, pass after pass (A, B, C, D, A, B, ...), so that a
+  // change in the machine's load falls on all of them alike; each figure is the median of
+  // its passes. On this shared VM one tree's rate moved by up to 76 % between two runs of
+  // three back-to-back passes each, which flipped most split-against-unsplit verdicts.
+  std::vector<double> rates[kVariants][2];
+  {
+    ThreadLimit trace_limit(opt.ray_threads);
+    for (int pass = 0; pass < opt.ray_passes; ++pass)
+      for (int k = 0; k < 2; ++k)
+        for (size_t v = 0; v < kVariants; ++v) {
+          // On one thread the tracing thread's own CPU time: the process's would also count
+          // the build's idle workers spinning down.
+          const auto clock = opt.ray_threads == 1 ? thread_cpu_seconds : process_cpu_seconds;
+          const double c0 = clock();
+          const RayMeasurement m = measure_rays(AnyTracer(*tracers[v]), rays[k], RayQuery::closest, {.repeats = 1});
+          const double cpu = (clock() - c0) / double(opt.ray_threads);
+          rates[v][k].push_back(cpu > 0 ? double(m.rays) / cpu : m.rays_per_second);
+        }
+  }
+  for (size_t v = 0; v < kVariants; ++v) {
+    nlohmann::json& row = out[v];
+    const double mrays[2] = {median(rates[v][0]) * 1e-6, median(rates[v][1]) * 1e-6};
+    // The spread of the passes: a ratio between two trees is settled only when it exceeds it.
+    const auto spread = [](std::vector<double> r) {
+      std::sort(r.begin(), r.end());
+      return r.back() > 0 ? (r[(3 * r.size()) / 4] - r[r.size() / 4]) / r[r.size() / 2] : 0.0;
+    };
+    row["primary_mrays"] = mrays[0];
+    row["random_mrays"] = mrays[1];
+    row["primary_iqr_fraction"] = spread(rates[v][0]);
+    row["random_iqr_fraction"] = spread(rates[v][1]);
+    row["ray_passes"] = opt.ray_passes;
+    row["ray_threads"] = opt.ray_threads;
+    std::printf("%-22s %-10s %7.3f %9.1f %9.2f %9.2f %8.1f %9.2f %9.2f %5.0f%% %5.0f%%\n", name.c_str(), variants[v].name,
+                row["refs_per_triangle"].get<double>(), row["build_seconds"].get<double>() * 1e3,
+                row["cost"].get<double>(), row["optimized_cost"].get<double>(), row["optimize_seconds"].get<double>(),
+                mrays[0], mrays[1], 100.0 * spread(rates[v][0]), 100.0 * spread(rates[v][1]));
+  }
+  std::fflush(stdout);
   return out;
 }
 
@@ -408,11 +452,12 @@ int run(int argc, char** argv) {
   const Options opt = parse(argc, argv);
   nlohmann::json all = nlohmann::json::array();
   if (opt.compare) {
-    std::printf("sbvh_bench --compare: %d threads, budget %.2f, insertion %.0f s per tree, bvh8 layout, rays/s "
-                "= rays over process CPU time / threads (median of 3)\n",
-                opt.threads, opt.budget, opt.opt_seconds > 0 ? opt.opt_seconds : 20.0);
-    std::printf("%-22s %-10s %7s %9s %9s %9s %8s %9s %9s\n", "scene", "variant", "ref/tri", "build ms", "cost",
-                "opt cost", "opt s", "prim Mr/s", "rand Mr/s");
+    std::printf("sbvh_bench --compare: %d build threads, budget %.2f, insertion %.0f s per tree, bvh8 layout; rays/s "
+                "on %d thread(s) = rays over CPU time (the thread's on one) / threads, median of %d interleaved passes "
+                "(iqr: interquartile range over the median)\n",
+                opt.threads, opt.budget, opt.opt_seconds > 0 ? opt.opt_seconds : 20.0, opt.ray_threads, opt.ray_passes);
+    std::printf("%-22s %-10s %7s %9s %9s %9s %8s %9s %9s %6s %6s\n", "scene", "variant", "ref/tri", "build ms", "cost",
+                "opt cost", "opt s", "prim Mr/s", "rand Mr/s", "p iqr", "r iqr");
     for (const std::string& spec : scene_specs(opt.scenes))
       for (float angle : opt.rotations)
         for (auto& row : compare_scene(opt, spec, angle)) all.push_back(row);

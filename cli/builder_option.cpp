@@ -40,11 +40,12 @@ void SceneBuilderOption::add_to(CLI::App* app) {
   add_budget_option(app, sbvh);
 }
 
-BuiltTree SceneBuilderOption::build(const Mesh& mesh, PrimitiveRefs refs, const CostModel& cost) const {
+BuiltTree SceneBuilderOption::build(const Mesh& mesh, PrimitiveRefs refs, const CostModel& cost,
+                                     uint32_t max_leaf_size) const {
   BuildOptions options;
   options.kind = *parse_builder(name);
   options.cost = cost;
-  options.leaf.max_leaf_size = 1;
+  options.leaf.max_leaf_size = max_leaf_size;
   options.sbvh = sbvh;
   return build_tree(mesh, std::move(refs), options);
 }

@@ -72,7 +72,8 @@ struct SceneBuilderOption {
   std::string name = "sweep";
   SpatialSplitParams sbvh;
   void add_to(CLI::App* app);
-  BuiltTree build(const Mesh& mesh, PrimitiveRefs refs, const CostModel& cost) const;
+  // Leaves of one reference unless asked (the SAH builders then test each leaf's cost).
+  BuiltTree build(const Mesh& mesh, PrimitiveRefs refs, const CostModel& cost, uint32_t max_leaf_size = 1) const;
 };
 
 // --ct / --ci: the SAH cost constants.

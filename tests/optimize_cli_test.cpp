@@ -2,6 +2,7 @@
 // summary, the cost trace, and errors that name the input.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -129,8 +130,18 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
   EXPECT_EQ(j["stop_reason"], "converged");  // best has no budget
   EXPECT_EQ(j["time_budget_seconds"], 0.0);
   EXPECT_LT(j["cost_optimized"].get<double>(), j["cost_built"].get<double>());
-  EXPECT_LT(j["cost"].get<double>(), j["cost_optimized"].get<double>());  // collapsing one-triangle leaves gains
+  EXPECT_LE(j["cost"].get<double>(), j["cost_optimized"].get<double>());
   EXPECT_GT(j["peak_rss_bytes"].get<uint64_t>(), 0u);
+  // Best runs from leaves of one and from the builder's SAH leaves of up to 8 and keeps the
+  // cheaper tree: the reported cost, start and file are that start's.
+  ASSERT_EQ(j["starts"].size(), 2u);
+  EXPECT_EQ(j["starts"][0]["leaf_size"], 1);
+  EXPECT_EQ(j["starts"][1]["leaf_size"], 8);
+  const double c1 = j["starts"][0]["cost"].get<double>(), c8 = j["starts"][1]["cost"].get<double>();
+  EXPECT_EQ(j["cost"].get<double>(), std::min(c1, c8));
+  EXPECT_EQ(j["start_leaf_size"], c8 < c1 ? 8 : 1);
+  EXPECT_LT(j["starts"][0]["cost"].get<double>(), j["starts"][0]["cost_optimized"].get<double>());  // collapsing one-triangle leaves gains
+  for (const auto& s : j["starts"]) EXPECT_EQ(s["stop_reason"], "converged");
   BvhFile file = read_bvh_file(a);
   // Collapsed leaves keep one reference per triangle: the dropped pieces are in no leaf.
   EXPECT_TRUE(validate_deduplicated(file.bvh, file.refs).ok());
@@ -139,6 +150,30 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
   EXPECT_NEAR(sah_cost(file.bvh, file.info.cost), j["cost"].get<double>(), 1e-9 * j["cost"].get<double>());
   EXPECT_NEAR(sah_cost(file.bvh, file.refs, file.info.cost), j["cost"].get<double>(), 1e-9 * j["cost"].get<double>());
   EXPECT_EQ(file.info.scene_triangles, j["triangles"].get<uint64_t>());
+
+  // One start on request: the same tree as that start of the two (the build is deterministic).
+  const fs::path one = dir_ / "one-start.bvh";
+  ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality best --start-leaf-sizes 8 --threads 2 --json -o " +
+                    one.string(),
+                &out, &err),
+            0)
+      << err;
+  const nlohmann::json j8 = nlohmann::json::parse(out);
+  EXPECT_EQ(j8["starts"].size(), 1u);
+  EXPECT_EQ(j8["cost"].get<double>(), c8);
+  EXPECT_NEAR(sah_cost(read_bvh_file(one).bvh, file.info.cost), c8, 1e-9 * c8);
+  // The cheaper start is kept whichever order they run in.
+  ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality best --start-leaf-sizes 8,1 --threads 2 --json -o " +
+                    one.string(),
+                &out, &err),
+            0)
+      << err;
+  const nlohmann::json jr = nlohmann::json::parse(out);
+  EXPECT_EQ(jr["cost"].get<double>(), std::min(c1, c8));
+  EXPECT_EQ(jr["start_leaf_size"], c8 < c1 ? 8 : 1);
+  EXPECT_NEAR(sah_cost(read_bvh_file(one).bvh, file.info.cost), std::min(c1, c8), 1e-9 * c8);
+  EXPECT_NE(run("bake 'builtin:atrium?triangles=4000' --start-leaf-sizes 0 -o " + one.string(), nullptr, &err), 0);
+  EXPECT_NE(err.find("start-leaf-sizes"), std::string::npos) << err;
 
   // Another builder on request, and sweep for the other qualities.
   ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality fast --json -o " + a.string(), &out, &err), 0) << err;
