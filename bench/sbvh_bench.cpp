@@ -16,13 +16,15 @@
 // peer figures (tinybvh BuildHQ + Optimize(50, extreme), or Embree HIGH; c_T = 3, c_I = 2).
 //
 // --compare: the edge volume heuristic beside spatial splits, per scene unrotated and
-// rotated by (30, 30, 0): sweep, sweep + EVH, SBVH and SBVH + EVH, each built (median of
-// --runs) and then optimized by insertion (--opt-seconds each, default 20): references per
-// triangle, cost, build time and rays per second of the optimized tree in the bvh8 layout
-// (primary and random rays made once per scene from the sweep tree, the same for all four;
-// --ray-threads threads, default 1; the four traced in turn, pass after pass, median of
-// --ray-passes passes, default 11, process CPU time over the thread count, with the
-// passes' interquartile range).
+// rotated by (30, 30, 0): sweep, sweep + EVH, SBVH, SBVH + EVH and SBVH with SAH leaves of
+// up to 8 (bake --quality best's second start; its cost counts those leaves), each built
+// (median of --runs) and then optimized by insertion (--opt-seconds each, default 20):
+// references per triangle, cost, build time and rays per second of the optimized tree in
+// the bvh8 layout (primary and random rays made once per scene from the sweep tree, the same
+// for all; --ray-threads threads, default 1; the trees traced in turn, pass after pass,
+// median of --ray-passes passes, default 11, CPU time over the thread count, with the
+// passes' interquartile range), and the work per ray that load does not change: traversal
+// steps and triangle tests.
 #ifdef BVHOPT_HAVE_EMBREE
 #include <embree3/rtcore.h>
 
@@ -350,6 +352,7 @@ struct Variant {
   const char* name;
   BuilderKind kind;
   bool evh;
+  uint32_t leaf_size = 1;  // 8: bake --quality best's second start
 };
 
 nlohmann::json compare_scene(const Options& opt, const std::string& spec, float angle) {
@@ -362,7 +365,8 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
   const Variant variants[] = {{"sweep", BuilderKind::sweep_sah, false},
                               {"sweep+evh", BuilderKind::sweep_sah, true},
                               {"sbvh", BuilderKind::spatial_split, false},
-                              {"sbvh+evh", BuilderKind::spatial_split, true}};
+                              {"sbvh+evh", BuilderKind::spatial_split, true},
+                              {"sbvh-l8", BuilderKind::spatial_split, false, 8}};
   constexpr size_t kVariants = std::size(variants);
   std::vector<Ray> rays[2];
   std::vector<std::unique_ptr<WideTracer>> tracers;
@@ -372,6 +376,7 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     bo.kind = v.kind;
     bo.cost = cost;
     bo.sbvh.budget = opt.budget;
+    bo.leaf.max_leaf_size = v.leaf_size;
     BuiltTree tree;
     std::vector<double> walls;
     for (int run = 0; run < opt.runs; ++run)
@@ -411,8 +416,18 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
   // its passes. On this shared VM one tree's rate moved by up to 76 % between two runs of
   // three back-to-back passes each, which flipped most split-against-unsplit verdicts.
   std::vector<double> rates[kVariants][2];
+  double steps[kVariants][2], tests[kVariants][2];
   {
     ThreadLimit trace_limit(opt.ray_threads);
+    // The work per ray, which does not depend on the machine's load: traversal steps
+    // (nodes visited) and triangle tests, from one counting pass.
+    for (size_t v = 0; v < kVariants; ++v)
+      for (int k = 0; k < 2; ++k) {
+        const RayMeasurement m = measure_rays(AnyTracer(*tracers[v]), rays[k], RayQuery::closest, {.repeats = 1});
+        steps[v][k] = m.steps.mean;
+        tests[v][k] = m.triangle_tests.mean;
+      }
+    std::vector<Hit> hits;
     for (int pass = 0; pass < opt.ray_passes; ++pass)
       for (int k = 0; k < 2; ++k)
         for (size_t v = 0; v < kVariants; ++v) {
@@ -420,9 +435,9 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
           // the build's idle workers spinning down.
           const auto clock = opt.ray_threads == 1 ? thread_cpu_seconds : process_cpu_seconds;
           const double c0 = clock();
-          const RayMeasurement m = measure_rays(AnyTracer(*tracers[v]), rays[k], RayQuery::closest, {.repeats = 1});
+          trace_rays(AnyTracer(*tracers[v]), rays[k], RayQuery::closest, hits);
           const double cpu = (clock() - c0) / double(opt.ray_threads);
-          rates[v][k].push_back(cpu > 0 ? double(m.rays) / cpu : m.rays_per_second);
+          rates[v][k].push_back(cpu > 0 ? double(rays[k].size()) / cpu : 0.0);
         }
   }
   for (size_t v = 0; v < kVariants; ++v) {
@@ -437,12 +452,20 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     row["random_mrays"] = mrays[1];
     row["primary_iqr_fraction"] = spread(rates[v][0]);
     row["random_iqr_fraction"] = spread(rates[v][1]);
+    row["primary_steps_mean"] = steps[v][0];
+    row["random_steps_mean"] = steps[v][1];
+    row["primary_triangle_tests_mean"] = tests[v][0];
+    row["random_triangle_tests_mean"] = tests[v][1];
+    row["wide_bytes"] = tracers[v]->layout().stats().bytes;
+    row["wide_blocks"] = tracers[v]->layout().stats().blocks;
     row["ray_passes"] = opt.ray_passes;
     row["ray_threads"] = opt.ray_threads;
-    std::printf("%-22s %-10s %7.3f %9.1f %9.2f %9.2f %8.1f %9.2f %9.2f %5.0f%% %5.0f%%\n", name.c_str(), variants[v].name,
-                row["refs_per_triangle"].get<double>(), row["build_seconds"].get<double>() * 1e3,
-                row["cost"].get<double>(), row["optimized_cost"].get<double>(), row["optimize_seconds"].get<double>(),
-                mrays[0], mrays[1], 100.0 * spread(rates[v][0]), 100.0 * spread(rates[v][1]));
+    std::printf("%-22s %-10s %7.3f %9.1f %9.2f %9.2f %8.1f %9.2f %9.2f %5.0f%% %5.0f%% %6.2f %6.2f %6.2f %6.2f %7.1f\n",
+                name.c_str(), variants[v].name, row["refs_per_triangle"].get<double>(),
+                row["build_seconds"].get<double>() * 1e3, row["cost"].get<double>(),
+                row["optimized_cost"].get<double>(), row["optimize_seconds"].get<double>(), mrays[0], mrays[1],
+                100.0 * spread(rates[v][0]), 100.0 * spread(rates[v][1]), steps[v][0], tests[v][0], steps[v][1],
+                tests[v][1], double(tracers[v]->layout().stats().bytes) / (1 << 20));
   }
   std::fflush(stdout);
   return out;
@@ -454,10 +477,11 @@ int run(int argc, char** argv) {
   if (opt.compare) {
     std::printf("sbvh_bench --compare: %d build threads, budget %.2f, insertion %.0f s per tree, bvh8 layout; rays/s "
                 "on %d thread(s) = rays over CPU time (the thread's on one) / threads, median of %d interleaved passes "
-                "(iqr: interquartile range over the median)\n",
+                "(iqr: interquartile range over the median); steps and triangle tests per ray\n",
                 opt.threads, opt.budget, opt.opt_seconds > 0 ? opt.opt_seconds : 20.0, opt.ray_threads, opt.ray_passes);
-    std::printf("%-22s %-10s %7s %9s %9s %9s %8s %9s %9s %6s %6s\n", "scene", "variant", "ref/tri", "build ms", "cost",
-                "opt cost", "opt s", "prim Mr/s", "rand Mr/s", "p iqr", "r iqr");
+    std::printf("%-22s %-10s %7s %9s %9s %9s %8s %9s %9s %6s %6s %6s %6s %6s %6s %7s\n", "scene", "variant", "ref/tri",
+                "build ms", "cost", "opt cost", "opt s", "prim Mr/s", "rand Mr/s", "p iqr", "r iqr", "p stp", "p tst",
+                "r stp", "r tst", "MiB");
     for (const std::string& spec : scene_specs(opt.scenes))
       for (float angle : opt.rotations)
         for (auto& row : compare_scene(opt, spec, angle)) all.push_back(row);
