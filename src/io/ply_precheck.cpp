@@ -53,6 +53,17 @@ int type_size(const std::string& type, int line, const std::string& where) {
   throw Error(where + ": header line " + std::to_string(line) + ": unknown property type '" + printable(type) + "'");
 }
 
+// The first byte of `line` below 0x20 other than a tab (and a CR where `cr_ok`), or -1.
+// Both readers must split a line into the same words, and they agree on spaces and tabs
+// only: assimp's tokenizer does not take the other control bytes as blanks.
+int first_control_byte(std::string_view line, bool cr_ok) {
+  for (const char c : line) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte < 0x20 && byte != '\t' && !(cr_ok && byte == '\r')) return byte;
+  }
+  return -1;
+}
+
 // The header after the "ply" line, up to end_header (left as the stream's position).
 PlyHeader read_ply_header(std::istream& in, const std::string& where) {
   PlyHeader h;
@@ -63,12 +74,9 @@ PlyHeader read_ply_header(std::istream& in, const std::string& where) {
     // A header line's words are split at blanks here but not by assimp, which hangs on a
     // header whose end_header it does not see (found by fuzz/scene_file_fuzzer:
     // "end_header" then a vertical tab). The header is plain text: no control byte but tabs.
-    for (const char c : text) {
-      const auto byte = static_cast<unsigned char>(c);
-      if (byte < 0x20 && byte != '\t')
-        throw Error(where + ": header line " + std::to_string(line) + ": control byte " + std::to_string(byte) +
-                    " (a PLY header is plain text)");
-    }
+    if (const int byte = first_control_byte(text, false); byte >= 0)
+      throw Error(where + ": header line " + std::to_string(line) + ": control byte " + std::to_string(byte) +
+                  " (a PLY header is plain text)");
     std::istringstream words(text);
     std::string word;
     words >> word;
@@ -151,12 +159,9 @@ void check_ascii_ply(const std::vector<char>& data, const PlyHeader& h, const st
       }
       line_end = at;
       while (line_end < data.size() && data[line_end] != '\n') ++line_end;
-      for (size_t c = at; c < line_end; ++c) {
-        const auto byte = static_cast<unsigned char>(data[c]);
-        if (byte < 0x20 && byte != '\t' && byte != '\r')
-          throw Error(where + ": " + e.name + " " + std::to_string(i) + ": control byte " + std::to_string(byte) +
-                      " in an ASCII line");
-      }
+      if (const int byte = first_control_byte(std::string_view(data.data() + at, line_end - at), true); byte >= 0)
+        throw Error(where + ": " + e.name + " " + std::to_string(i) + ": control byte " + std::to_string(byte) +
+                    " in an ASCII line");
       for (const PlyProperty& prop : e.properties) {
         if (!next_token(token)) throw short_by(i);
         if (!prop.count_size) continue;
