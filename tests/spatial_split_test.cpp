@@ -617,5 +617,38 @@ TEST(TriangleCost, SubtreeCountsMatchBruteForce) {
   EXPECT_GT(repeated, 0u) << "no leaf repeats a triangle: the test says nothing";
 }
 
+// The shortcut for unsplit references: it must see a triangle's second slot wherever it
+// is, and where it sees none, the triangle-counting functions must give what the
+// reference-counting ones give, bit for bit, and the same collapsed tree.
+TEST(TriangleCost, OneSlotPerTriangleTakesTheReferenceCountingPathWithTheSameResult) {
+  const Mesh mesh = crossing_mesh(400, 41);
+  SweepSahConfig config;
+  config.leaf.max_leaf_size = 1;
+  const PrimitiveRefs refs = make_references(mesh);
+  const Bvh unsplit = build_sweep_sah(refs, config);
+  ASSERT_TRUE(one_slot_per_triangle(unsplit, refs));
+  EXPECT_EQ(sah_cost(unsplit, refs), sah_cost(unsplit));
+  EXPECT_EQ(optimal_collapse_cost(unsplit, refs), optimal_collapse_cost(unsplit));
+  EXPECT_EQ(optimal_collapse_cost(unsplit, refs, {}, 4), optimal_collapse_cost(unsplit, {}, 4));
+  Bvh a = unsplit, b = unsplit;
+  const CollapseResult ca = collapse_leaves(a, refs, CollapseConfig{});
+  const CollapseResult cb = collapse_leaves(b, CollapseConfig{});
+  EXPECT_EQ(ca.cost_after, cb.cost_after);
+  EXPECT_EQ(ca.dropped_references, 0u);
+  EXPECT_EQ(a.ref_indices, b.ref_indices);
+  ASSERT_EQ(a.nodes.size(), b.nodes.size());
+  for (size_t n = 0; n < a.nodes.size(); ++n)
+    EXPECT_EQ(a.nodes[n].right_or_count, b.nodes[n].right_or_count) << "node " << n;
+
+  // Split references: two slots of one triangle, in leaves far apart or in one leaf.
+  const SpatialSplitResult r = build_sbvh(mesh, 3.0);
+  ASSERT_GT(r.refs.size(), mesh.triangle_count());
+  EXPECT_FALSE(one_slot_per_triangle(r.bvh, r.refs));
+  // One reference per triangle but a slot listed twice: also not one slot per triangle.
+  Bvh twice = unsplit;
+  twice.ref_indices.back() = twice.ref_indices.front();
+  EXPECT_FALSE(one_slot_per_triangle(twice, refs));
+}
+
 }  // namespace
 }  // namespace bvhopt

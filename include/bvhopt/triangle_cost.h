@@ -17,6 +17,11 @@
 
 namespace bvhopt {
 
+// True when no triangle has two of the tree's slots (bvh.ref_indices), as with one
+// reference per triangle: then every count below is the plain reference count, and the
+// functions here and collapse_leaves take the reference-counting paths of cost.h, which give
+// the very same numbers without the per-triangle bookkeeping. O(slots), a bit per triangle.
+bool one_slot_per_triangle(const Bvh& bvh, const PrimitiveRefs& refs);
 // Per node, the distinct triangles among the references of its subtree (a leaf: of its
 // own). Indexed by node; unreachable nodes get 0. O(references x depth).
 std::vector<uint64_t> subtree_triangle_counts(const Bvh& bvh, const PrimitiveRefs& refs);

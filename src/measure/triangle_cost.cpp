@@ -17,6 +17,18 @@ uint32_t common_ancestor(const Bvh& bvh, const std::vector<uint32_t>& depth, uin
 
 }  // namespace
 
+bool one_slot_per_triangle(const Bvh& bvh, const PrimitiveRefs& refs) {
+  uint32_t triangles = 0;
+  for (uint32_t t : refs.triangle_ids) triangles = std::max(triangles, t + 1);
+  std::vector<bool> seen(triangles, false);
+  for (uint32_t r : bvh.ref_indices) {
+    const uint32_t t = refs.triangle_ids[r];
+    if (seen[t]) return false;
+    seen[t] = true;
+  }
+  return true;
+}
+
 // Visiting the leaves in depth-first order, each triangle adds 1 at every leaf holding it
 // and -1 at the deepest common ancestor of each two leaves that hold it one after the
 // other (the same leaf twice included). Summed over a subtree, the triangles with a
@@ -55,6 +67,7 @@ std::vector<uint64_t> subtree_triangle_counts(const Bvh& bvh, const PrimitiveRef
 
 double sah_cost(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& model) {
   if (bvh.empty()) return 0.0;
+  if (one_slot_per_triangle(bvh, refs)) return sah_cost(bvh, model);
   const std::vector<uint64_t> triangles = subtree_triangle_counts(bvh, refs);
   // The weights sah_cost uses (areas, or the formula's limit for a zero-area root).
   const CostWeights w(bvh);
@@ -72,6 +85,7 @@ double sah_cost(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& mode
 double optimal_collapse_cost(const Bvh& bvh, const PrimitiveRefs& refs, const CostModel& model,
                              uint32_t max_leaf_size) {
   if (bvh.empty()) return 0.0;
+  if (one_slot_per_triangle(bvh, refs)) return optimal_collapse_cost(bvh, model, max_leaf_size);
   const double c =
       collapse_costs(bvh, model, max_leaf_size, subtree_triangle_counts(bvh, refs)).best[bvh.root] / CostWeights(bvh).root();
   check_finite_cost(c, "ocost");

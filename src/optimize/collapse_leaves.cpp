@@ -77,6 +77,10 @@ CollapseResult collapse_leaves(Bvh& bvh, const CollapseConfig& config) {
 CollapseResult collapse_leaves(Bvh& bvh, const PrimitiveRefs& refs, const CollapseConfig& config) {
   CollapseResult result;
   if (bvh.empty()) return result;
+  // Unsplit references: no leaf can gain a second slot of a triangle, so the plain
+  // collapse is this one, without its per-triangle counts and the deduplicating pass (at
+  // 2M triangles those were most of bake's collapse time).
+  if (one_slot_per_triangle(bvh, refs)) return collapse_leaves(bvh, config);
   result.cost_before = sah_cost(bvh, refs, config.cost);
   const std::vector<uint64_t> triangles = subtree_triangle_counts(bvh, refs);
   collapse_marked(bvh, collapse_costs(bvh, config.cost, config.max_leaf_size, triangles).collapse, result);
