@@ -183,6 +183,64 @@ TEST(WideCollapse, SameResultOnAnyThreadCount) {
   EXPECT_EQ(one.leaf_triangles, two.leaf_triangles);
 }
 
+// The recurrence of Ylitie et al. in double, node by node from the root (memoized): C(n, i)
+// for i = 1..width, the cheapest representation of n's subtree as at most i subtrees. Its
+// cost is what the DP must reach on trees large enough that the DP solves subtrees in
+// parallel tasks and joins their rows.
+class Recurrence {
+ public:
+  Recurrence(const FlatBvh& bvh, const CollapseOptions& o) : bvh_(bvh), o_(o), rows_(bvh.nodes.size()) {}
+
+  double root_cost() {
+    const FlatNode& root = bvh_.nodes[0];
+    return (o_.cost.node * root.box.area() + distribute(0, o_.width)) / root.box.area();
+  }
+
+ private:
+  uint32_t triangles(uint32_t n) const {  // trees of unsplit triangles: every entry distinct
+    const FlatNode& f = bvh_.nodes[n];
+    return f.is_leaf() ? f.count : triangles(n + 1) + triangles(f.index);
+  }
+  // The best split of j slots over n's two children.
+  double distribute(uint32_t n, uint32_t j) {
+    double best = kInf;
+    for (uint32_t k = 1; k < j; ++k) best = std::min(best, row(n + 1)[k - 1] + row(bvh_.nodes[n].index)[j - k - 1]);
+    return best;
+  }
+  const std::vector<double>& row(uint32_t n) {
+    std::vector<double>& r = rows_[n];
+    if (!r.empty()) return r;
+    const FlatNode& f = bvh_.nodes[n];
+    const uint32_t t = triangles(n);
+    const double leaf = f.is_leaf() || t <= o_.max_leaf_triangles ? o_.cost.block * f.box.area() * double((t + 3) / 4) : kInf;
+    std::vector<double> c(o_.width, leaf);
+    if (!f.is_leaf()) {
+      c[0] = std::min(leaf, o_.cost.node * f.box.area() + distribute(n, o_.width));
+      for (uint32_t i = 2; i <= o_.width; ++i) c[i - 1] = std::min(c[i - 2], distribute(n, i));
+    }
+    return r = std::move(c);
+  }
+
+  const FlatBvh& bvh_;
+  CollapseOptions o_;
+  std::vector<std::vector<double>> rows_;
+};
+
+TEST(WideCollapse, LargeTreesReachTheRecurrencesOptimum) {
+  for (const uint32_t leaf : {1u, 4u}) {
+    const FlatBvh bvh = small_tree(20000, 12, BuilderKind::sweep_sah, leaf);
+    ASSERT_GT(bvh.nodes.size(), 3u * 4096u) << "too small for the DP's parallel subtrees";
+    for (const uint32_t width : {4u, 8u}) {
+      CollapseOptions o;
+      o.width = width;
+      const double expected = Recurrence(bvh, o).root_cost();
+      const CollapsedBvh w = collapse_to_wide(bvh, o);
+      // The DP compares costs in float: a near tie may go the other way.
+      EXPECT_NEAR(w.sah_cost, expected, 1e-5 * expected) << "leaf " << leaf << ", width " << width;
+    }
+  }
+}
+
 TEST(WideCollapse, LeafLimitAndWidthAreHonoured) {
   const FlatBvh bvh = small_tree(2000, 10, BuilderKind::sweep_sah, 1);
   for (uint32_t limit : {1u, 3u, 16u}) {

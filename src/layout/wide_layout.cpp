@@ -167,6 +167,13 @@ class LayoutBuilder {
 
   void write_leaf(TriangleBlock* out, uint32_t leaf, uint32_t blocks) const {
     const uint32_t first = wide_.leaf_begin[leaf], count = wide_.leaf_begin[leaf + 1] - first;
+    // The leaf's triangles lie anywhere in the mesh: ask for all their vertices first, so
+    // that the misses overlap instead of each triangle waiting for its index, then its
+    // vertices (that chain was the largest part of writing a node).
+    for (uint32_t k = 0; k < count; ++k) {
+      const uint32_t* v = mesh_.indices.data() + 3 * size_t(wide_.leaf_triangles[first + k]);
+      for (int c = 0; c < 3; ++c) __builtin_prefetch(mesh_.positions.data() + 3 * size_t(v[c]));
+    }
     for (uint32_t b = 0; b < blocks; ++b) {
       TriangleBlock& block = out[b];
       for (uint32_t lane = 0; lane < 4; ++lane) {
@@ -202,9 +209,12 @@ class LayoutBuilder {
     }
     // Per octant, children sorted by the position of their centre along the octant's
     // diagonal: the order a ray of that octant meets them when they do not overlap.
+    // The opposite octant (o ^ 7) negates every key: its order is this one reversed, with
+    // each run of equal keys put back in slot order, as its own stable sort would leave it.
+    // That halves the sorting, a quarter of writing a node.
     const uint32_t used = end - begin;
-    for (int o = 0; o < 8; ++o) {
-      const Vec3 s((o & 1) ? -1.0f : 1.0f, (o & 2) ? -1.0f : 1.0f, (o & 4) ? -1.0f : 1.0f);
+    for (int o = 0; o < 4; ++o) {
+      const Vec3 s((o & 1) ? -1.0f : 1.0f, (o & 2) ? -1.0f : 1.0f, 1.0f);
       uint32_t order[W];
       for (uint32_t c = 0; c < W; ++c) order[c] = c;
       float key[W];
@@ -212,6 +222,15 @@ class LayoutBuilder {
       for (uint32_t i = 1; i < used; ++i)  // insertion sort: at most 8, stable
         for (uint32_t j = i; j > 0 && key[order[j]] < key[order[j - 1]]; --j) std::swap(order[j], order[j - 1]);
       for (uint32_t k = 0; k < W; ++k) Access::set_order(node, o, k, order[k]);
+      uint32_t opposite[W];
+      for (uint32_t k = 0; k < W; ++k) opposite[k] = k < used ? order[used - 1 - k] : order[k];
+      for (uint32_t run = 0; run < used;) {
+        uint32_t stop = run + 1;
+        while (stop < used && key[opposite[stop]] == key[opposite[run]]) ++stop;
+        std::reverse(opposite + run, opposite + stop);
+        run = stop;
+      }
+      for (uint32_t k = 0; k < W; ++k) Access::set_order(node, o ^ 7, k, opposite[k]);
     }
   }
 
