@@ -679,6 +679,7 @@ class SpatialSplitBuilder {
   // back, left ones from the node's first slot and right ones from the right child's.
   // False (nothing changed) when a side would be empty or the node's room too small.
   bool partition(const Task& t, const Split& s, Task& l, Task& r) {
+    if (s.kind != Split::spatial && !parallel(t.count)) return partition_whole(t, s, l, r);
     const SpatialMapping m(t.state.box, spatial_bin_count(t.count));
     const ObjectMapping om(t.state.centres, object_bin_count(t.count));
     const size_t blocks = (t.count + kBlock - 1) / kBlock;
@@ -729,19 +730,7 @@ class SpatialSplitBuilder {
     }
     if (total.left == 0 || total.right == 0 || total.left + total.right > t.capacity) return false;
 
-    // The spare room is shared by the children's SAH weights, count times surface area: the
-    // share of the cost each child stands for is where splits can save. By counts alone,
-    // large sparse children (Sponza's and Conference's open halls, 2CylinderEngine's long
-    // parts) ran short while compact dense ones kept room they never used: with the left
-    // child's leftover passed on (build_packed), 2CylinderEngine 260.94 -> 256.55,
-    // Conference 102.82 -> 100.62, Sponza 171.06 -> 169.79 (area alone: 259.71, 104.43,
-    // 170.80).
-    const size_t spare = t.capacity - total.left - total.right;
-    const double wl = double(total.left) * double(total.l.box.area());
-    const double wr = double(total.right) * double(total.r.box.area());
-    double share = wl / (wl + wr);
-    if (!std::isfinite(share)) share = double(total.left) / double(total.left + total.right);  // 0/0, inf/inf
-    const size_t left_room = total.left + std::min(spare, static_cast<size_t>(double(spare) * share));
+    const size_t left_room = left_room_of(t, total);
     auto write_block = [&](size_t b) {
       SRef* lo = slots_.get() + t.begin + left_at[b];
       SRef* hi = slots_.get() + t.begin + left_room + right_at[b];
@@ -756,13 +745,69 @@ class SpatialSplitBuilder {
     else
       for (size_t b = 0; b < blocks; ++b) write_block(b);
 
+    finish_partition(t, s, total, left_room, l, r);
+    return true;
+  }
+
+  // A split that sends every reference whole to one side, in one serial pass: left ones
+  // packed forward in place (never past the one being read), right ones through scratch to
+  // the right child's first slot. The same children, in the same order, as the two passes
+  // above, without copying every reference out and back (on classroom and staircase the
+  // partition was a quarter of the build, nearly all of it object splits).
+  bool partition_whole(const Task& t, const Split& s, Task& l, Task& r) {
+    const ObjectMapping om(t.state.centres, object_bin_count(t.count));
+    // Nothing here waits in oneTBB, so no other task runs on this thread meanwhile.
+    thread_local std::vector<SRef> right_scratch;
+    if (right_scratch.size() < t.count) right_scratch.resize(t.count);
+    SRef* rs = right_scratch.data();
+    SRef* node = slots_.get() + t.begin;
+    Sides total;
+    SRef unused;
+    for (size_t i = 0; i < t.count; ++i) {
+      const SRef ref = node[i];
+      if (classify(s, nullptr, &om, i, ref, unused, unused, total) & kLeft) {
+        node[total.left++] = ref;
+        total.l.box.extend(ref.box);
+        total.l.centres.extend(ref.box.center());
+      } else {
+        rs[total.right++] = ref;
+        total.r.box.extend(ref.box);
+        total.r.centres.extend(ref.box.center());
+      }
+    }
+    if (total.left == 0 || total.right == 0) {  // unchanged: all stayed in place, or all come back in order
+      if (total.left == 0) std::copy(rs, rs + total.right, node);
+      return false;
+    }
+    const size_t left_room = left_room_of(t, total);
+    std::copy(rs, rs + total.right, node + left_room);
+    finish_partition(t, s, total, left_room, l, r);
+    return true;
+  }
+
+  size_t left_room_of(const Task& t, const Sides& total) const {
+    // The spare room is shared by the children's SAH weights, count times surface area: the
+    // share of the cost each child stands for is where splits can save. By counts alone,
+    // large sparse children (Sponza's and Conference's open halls, 2CylinderEngine's long
+    // parts) ran short while compact dense ones kept room they never used: with the left
+    // child's leftover passed on (build_packed), 2CylinderEngine 260.94 -> 256.55,
+    // Conference 102.82 -> 100.62, Sponza 171.06 -> 169.79 (area alone: 259.71, 104.43,
+    // 170.80).
+    const size_t spare = t.capacity - total.left - total.right;
+    const double wl = double(total.left) * double(total.l.box.area());
+    const double wr = double(total.right) * double(total.r.box.area());
+    double share = wl / (wl + wr);
+    if (!std::isfinite(share)) share = double(total.left) / double(total.left + total.right);  // 0/0, inf/inf
+    return total.left + std::min(spare, static_cast<size_t>(double(spare) * share));
+  }
+
+  void finish_partition(const Task& t, const Split& s, const Sides& total, size_t left_room, Task& l, Task& r) {
     (s.kind == Split::spatial ? spatial_splits_ : object_splits_).fetch_add(1, std::memory_order_relaxed);
     cut_.fetch_add(total.cut, std::memory_order_relaxed);
     unsplit_.fetch_add(total.unsplit, std::memory_order_relaxed);
     l = Task{t.begin, total.left, left_room, t.base + 1, t.base, total.l};
     r = Task{t.begin + left_room, total.right, t.capacity - left_room, t.base + static_cast<uint32_t>(2 * left_room),
              t.base, total.r};
-    return true;
   }
 
   // The slots the leaves use become the result's references, numbered depth-first; the
