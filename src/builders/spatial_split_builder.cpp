@@ -35,11 +35,13 @@ struct NodeState {
   Box centres;
 };
 
-// A subtree: references in slots [begin, begin + count), room for `capacity` of them, and
-// nodes [base, base + 2 capacity - 1) to number its nodes in (as TopDownTree's NodeRange,
-// with the room for spatial splits' new references counted in).
+// A subtree: references in slots [begin, begin + count), room for `capacity` of them in
+// slots [room, room + capacity) (room <= begin: a right child built by one task keeps its
+// references where its parent put them while its room grows down to where its left sibling
+// ended), and nodes [base, base + 2 capacity - 1) to number its nodes in (as TopDownTree's
+// NodeRange, with the room for spatial splits' new references counted in).
 struct Task {
-  size_t begin, count, capacity;
+  size_t room, begin, count, capacity;
   uint32_t base, parent;
   NodeState state;
 };
@@ -232,7 +234,7 @@ class SpatialSplitBuilder {
     Bvh& bvh = out_.bvh;
     bvh.nodes.assign(2 * capacity_ - 1, BvhNode{});
     bvh.root = 0;
-    build(Task{0, n, capacity_, 0, kInvalidNode, root});
+    build(Task{0, 0, n, capacity_, 0, kInvalidNode, root});
     tasks_.wait();
     compact();
     SpatialSplitStats& s = out_.stats;
@@ -274,10 +276,12 @@ class SpatialSplitBuilder {
   // the start of its slots and its nodes numbered in order from its root: the room a left
   // subtree leaves unused goes to its right sibling instead of being lost (with a fixed
   // range per child, Sponza used 1.188 references per triangle of 1.3, 2CylinderEngine
-  // 1.242; packed, 1.267 and 1.283, at 1.1 and 1.1 % lower cost). The
-  // order is fixed, so the tree is still the same on any number of threads. A subtree that
-  // ends up with u references has at most 2u - 1 nodes, so a right sibling placed after the
-  // left one's last node and slot still fits the range its parent was given.
+  // 1.242; packed, 1.267 and 1.283, at 1.1 and 1.1 % lower cost). The right child's
+  // references stay where the partition wrote them, its room reaching down to the left
+  // one's end (Task::room): they move only when it is split or made a leaf. The order is
+  // fixed, so the tree is still the same on any number of threads. A subtree that ends up
+  // with u references has at most 2u - 1 nodes, so a right sibling placed after the left
+  // one's last node and slot still fits the range its parent was given.
   void build_packed(Task t) {
     struct Pending {
       size_t at, count, end;  // the right child's references, and the end of its room
@@ -285,7 +289,7 @@ class SpatialSplitBuilder {
       NodeState state;
     };
     std::vector<Pending> pending;  // local: split() may wait in oneTBB and run another subtree here
-    size_t cursor = t.begin;       // first free slot
+    size_t cursor = t.room;        // first free slot
     uint32_t next_node = t.base;
     for (;;) {
       const uint32_t index = next_node++;
@@ -295,7 +299,7 @@ class SpatialSplitBuilder {
       node.set_box(t.state.box);
       Task l, r;
       if (split(t, node.area(), l, r)) {
-        pending.push_back(Pending{r.begin, r.count, t.begin + t.capacity, index, r.state});
+        pending.push_back(Pending{r.begin, r.count, t.room + t.capacity, index, r.state});
         l.parent = index;
         t = l;
         continue;
@@ -304,10 +308,8 @@ class SpatialSplitBuilder {
       if (pending.empty()) return;
       const Pending p = pending.back();
       pending.pop_back();
-      SRef* s = slots_.get();
-      if (p.at != cursor) std::copy(s + p.at, s + p.at + p.count, s + cursor);
       out_.bvh.nodes[p.parent].make_inner(p.parent + 1, next_node);
-      t = Task{cursor, p.count, p.end - cursor, next_node, p.parent, p.state};
+      t = Task{cursor, p.at, p.count, p.end - cursor, next_node, p.parent, p.state};
     }
   }
 
@@ -322,7 +324,8 @@ class SpatialSplitBuilder {
       else
         s[kept++] = s[i];
     }
-    node.make_leaf(static_cast<uint32_t>(t.begin), static_cast<uint32_t>(kept));
+    if (t.room != t.begin) std::copy(s, s + kept, slots_.get() + t.room);
+    node.make_leaf(static_cast<uint32_t>(t.room), static_cast<uint32_t>(kept));
     return kept;
   }
 
@@ -732,8 +735,8 @@ class SpatialSplitBuilder {
 
     const size_t left_room = left_room_of(t, total);
     auto write_block = [&](size_t b) {
-      SRef* lo = slots_.get() + t.begin + left_at[b];
-      SRef* hi = slots_.get() + t.begin + left_room + right_at[b];
+      SRef* lo = slots_.get() + t.room + left_at[b];
+      SRef* hi = slots_.get() + t.room + left_room + right_at[b];
       const size_t end = std::min(t.count, (b + 1) * kBlock);
       for (size_t i = b * kBlock; i < end; ++i) {
         if (side[i] & kLeft) *lo++ = side[i] & kPieces ? left[i] : whole[i];
@@ -760,13 +763,14 @@ class SpatialSplitBuilder {
     thread_local std::vector<SRef> right_scratch;
     if (right_scratch.size() < t.count) right_scratch.resize(t.count);
     SRef* rs = right_scratch.data();
-    SRef* node = slots_.get() + t.begin;
+    const SRef* node = slots_.get() + t.begin;
+    SRef* to = slots_.get() + t.room;  // at or below `node`: writing never overtakes reading
     Sides total;
     SRef unused;
     for (size_t i = 0; i < t.count; ++i) {
       const SRef ref = node[i];
       if (classify(s, nullptr, &om, i, ref, unused, unused, total) & kLeft) {
-        node[total.left++] = ref;
+        to[total.left++] = ref;
         total.l.box.extend(ref.box);
         total.l.centres.extend(ref.box.center());
       } else {
@@ -775,12 +779,16 @@ class SpatialSplitBuilder {
         total.r.centres.extend(ref.box.center());
       }
     }
-    if (total.left == 0 || total.right == 0) {  // unchanged: all stayed in place, or all come back in order
-      if (total.left == 0) std::copy(rs, rs + total.right, node);
+    if (total.left == 0 || total.right == 0) {  // put back as they were
+      SRef* back = slots_.get() + t.begin;
+      if (total.left == 0)
+        std::copy(rs, rs + total.right, back);
+      else if (to != back)
+        std::copy_backward(to, to + total.left, back + total.left);
       return false;
     }
     const size_t left_room = left_room_of(t, total);
-    std::copy(rs, rs + total.right, node + left_room);
+    std::copy(rs, rs + total.right, to + left_room);
     finish_partition(t, s, total, left_room, l, r);
     return true;
   }
@@ -805,9 +813,9 @@ class SpatialSplitBuilder {
     (s.kind == Split::spatial ? spatial_splits_ : object_splits_).fetch_add(1, std::memory_order_relaxed);
     cut_.fetch_add(total.cut, std::memory_order_relaxed);
     unsplit_.fetch_add(total.unsplit, std::memory_order_relaxed);
-    l = Task{t.begin, total.left, left_room, t.base + 1, t.base, total.l};
-    r = Task{t.begin + left_room, total.right, t.capacity - left_room, t.base + static_cast<uint32_t>(2 * left_room),
-             t.base, total.r};
+    l = Task{t.room, t.room, total.left, left_room, t.base + 1, t.base, total.l};
+    r = Task{t.room + left_room, t.room + left_room, total.right, t.capacity - left_room,
+             t.base + static_cast<uint32_t>(2 * left_room), t.base, total.r};
   }
 
   // The slots the leaves use become the result's references, numbered depth-first; the
