@@ -103,8 +103,9 @@ struct ObjectMapping {
       scale[a] = std::isfinite(s) ? s : 0.0f;
     }
   }
-  uint32_t bin(const Box& b, int a) const {
-    const int k = static_cast<int>((b.center()[a] - origin[a]) * scale[a]);
+  uint32_t bin(const Box& b, int a) const { return bin_of_centre(b.center()[a], a); }
+  uint32_t bin_of_centre(float c, int a) const {
+    const int k = static_cast<int>((c - origin[a]) * scale[a]);
     return static_cast<uint32_t>(std::clamp(k, 0, static_cast<int>(last)));
   }
 };
@@ -767,16 +768,20 @@ class SpatialSplitBuilder {
     SRef* to = slots_.get() + t.room;  // at or below `node`: writing never overtakes reading
     Sides total;
     SRef unused;
+    const bool object = s.kind == Split::object;  // the common case, without classify()'s dispatch
     for (size_t i = 0; i < t.count; ++i) {
       const SRef ref = node[i];
-      if (classify(s, nullptr, &om, i, ref, unused, unused, total) & kLeft) {
+      const Vec3 c = ref.box.center();
+      const bool left = object ? om.bin_of_centre(c[s.axis], s.axis) < s.bin
+                               : (classify(s, nullptr, &om, i, ref, unused, unused, total) & kLeft) != 0;
+      if (left) {
         to[total.left++] = ref;
         total.l.box.extend(ref.box);
-        total.l.centres.extend(ref.box.center());
+        total.l.centres.extend(c);
       } else {
         rs[total.right++] = ref;
         total.r.box.extend(ref.box);
-        total.r.centres.extend(ref.box.center());
+        total.r.centres.extend(c);
       }
     }
     if (total.left == 0 || total.right == 0) {  // put back as they were
