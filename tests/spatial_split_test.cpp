@@ -383,18 +383,95 @@ TEST(SpatialSplit, SpatialSplitsOnlyFromTheGivenNodeSize) {
   EXPECT_EQ(nowhere.refs.size(), mesh.triangle_count());
 }
 
+// With fixed ranges (every node its own task), with subtrees of one task passing their room
+// on, and with the whole tree built by one task.
 TEST(SpatialSplit, BudgetIsNeverExceeded) {
   const Mesh mesh = crossing_mesh(800, 9);
   const size_t n = mesh.triangle_count();
-  for (double budget : {1.0, 1.01, 1.1, 1.3, 2.0, 4.0}) {
-    const SpatialSplitResult r = build_sbvh(mesh, budget);
-    const size_t limit = static_cast<size_t>(std::floor(budget * double(n)));
-    EXPECT_LE(r.refs.size(), limit) << budget;
-    EXPECT_EQ(r.stats.budget, limit) << budget;
-    EXPECT_TRUE(validate(r.bvh, r.refs).ok()) << budget;
-    if (budget == 1.0) { EXPECT_EQ(r.refs.size(), n); }
-    if (budget >= 1.3) { EXPECT_GT(r.stats.spatial_splits, 0u); }
+  for (uint32_t threshold : {2u, 64u, 1u << 30})
+    for (double budget : {1.0, 1.01, 1.1, 1.3, 2.0, 4.0}) {
+      SpatialSplitConfig config;
+      config.budget = budget;
+      config.spatial_from = 0;
+      config.parallel_threshold = threshold;
+      const SpatialSplitResult r = build_spatial_split(mesh, make_references(mesh), config);
+      const size_t limit = static_cast<size_t>(std::floor(budget * double(n)));
+      EXPECT_LE(r.refs.size(), limit) << budget << " " << threshold;
+      EXPECT_EQ(r.stats.budget, limit) << budget;
+      EXPECT_TRUE(validate(r.bvh, r.refs).ok()) << budget << " " << threshold;
+      if (budget == 1.0) { EXPECT_EQ(r.refs.size(), n); }
+      if (budget >= 1.3) { EXPECT_GT(r.stats.spatial_splits, 0u); }
+    }
+}
+
+// A grid of small disjoint triangles, which gain nothing from spatial splits, beside long
+// sticks crossing each other, which gain from every reference they are given.
+Mesh grid_beside_sticks(uint32_t side, uint32_t sticks, uint64_t seed, bool sticks_left = false) {
+  Mesh mesh;
+  const Vec3 grid_at(sticks_left ? 2.0f * float(side) : 0.0f, 0.0f, 0.0f);
+  const Vec3 at(sticks_left ? 0.0f : 2.0f * float(side), 0.0f, 0.0f);
+  for (uint32_t i = 0; i < side; ++i)
+    for (uint32_t j = 0; j < side; ++j) {
+      const uint32_t base = static_cast<uint32_t>(mesh.vertex_count());
+      const Vec3 p = grid_at + Vec3(float(i), float(j), 0.0f);
+      mesh.add_vertex(p);
+      mesh.add_vertex(p + Vec3(0.5f, 0.0f, 0.0f));
+      mesh.add_vertex(p + Vec3(0.0f, 0.5f, 0.0f));
+      mesh.add_triangle(base, base + 1, base + 2);
+    }
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, float(side));
+  for (uint32_t k = 0; k < sticks; ++k) {
+    const uint32_t base = static_cast<uint32_t>(mesh.vertex_count());
+    const Vec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng));
+    mesh.add_vertex(at + a);
+    mesh.add_vertex(at + b);
+    mesh.add_vertex(at + a + Vec3(0.0f, 0.0f, 0.01f));
+    mesh.add_triangle(base, base + 1, base + 2);
   }
+  return mesh;
+}
+
+// A subtree built by one task (fewer than parallel_threshold references) passes the room
+// its left part leaves unused on to the right part: the tree built whole by one task uses
+// more of the budget than the one of fixed ranges (every node its own task), never more
+// than the budget, and both are valid.
+TEST(SpatialSplit, OneTaskSubtreesPassUnusedRoomOn) {
+  const Mesh mesh = grid_beside_sticks(40, 800, 5);
+  const size_t limit = static_cast<size_t>(std::floor(1.3 * double(mesh.triangle_count())));
+  SpatialSplitConfig config;
+  config.spatial_from = 0;
+  config.parallel_threshold = 2;
+  const SpatialSplitResult fixed = build_spatial_split(mesh, make_references(mesh), config);
+  config.parallel_threshold = 1u << 30;
+  const SpatialSplitResult packed = build_spatial_split(mesh, make_references(mesh), config);
+  for (const SpatialSplitResult* r : {&fixed, &packed}) {
+    EXPECT_LE(r->refs.size(), limit);
+    const ValidationReport v = validate(r->bvh, r->refs);
+    EXPECT_TRUE(v.ok()) << v.summary();
+    expect_covered(mesh, r->refs);
+  }
+  EXPECT_GT(packed.refs.size(), fixed.refs.size() + limit / 100);
+  EXPECT_LT(sah_cost(packed.bvh), sah_cost(fixed.bvh));
+}
+
+// The spare room goes to the children by count times surface area: the sticks, a third of
+// the triangles in a box of three times the grid's area, built first, get 60 % of it, where
+// a share by counts would leave them a third (and the grid after them could not use it).
+TEST(SpatialSplit, SpareRoomFollowsTheChildrenCountTimesArea) {
+  const uint32_t side = 40, sticks = 800;
+  const Mesh mesh = grid_beside_sticks(side, sticks, 5, /*sticks_left=*/true);
+  const size_t n = mesh.triangle_count();
+  SpatialSplitConfig config;
+  config.spatial_from = 0;
+  config.parallel_threshold = 1u << 30;
+  const SpatialSplitResult r = build_spatial_split(mesh, make_references(mesh), config);
+  ASSERT_TRUE(validate(r.bvh, r.refs).ok());
+  const size_t spare = static_cast<size_t>(std::floor(1.3 * double(n))) - n;
+  size_t stick_refs = 0;
+  for (uint32_t tri : r.refs.triangle_ids) stick_refs += tri >= side * side;
+  EXPECT_GT(stick_refs, sticks + spare / 3 + spare / 20);
+  EXPECT_LE(stick_refs, sticks + spare * 62 / 100);
 }
 
 void expect_same(const SpatialSplitResult& a, const SpatialSplitResult& b, const std::string& what) {

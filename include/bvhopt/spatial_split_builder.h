@@ -77,9 +77,13 @@ struct SpatialSplitResult {
 // triangle_clipping.h) and intersects each piece with the reference's box; a crossing
 // reference goes whole to one side when that is cheaper (the paper's reference
 // unsplitting). Each subtree owns a fixed range of reference slots whose spare room is
-// shared between the children by their counts, so the budget holds without any shared
-// counter, and the tree is the same on any number of threads. Leaf boxes and inner boxes
-// are refitted to the final references.
+// shared between the children by their SAH weights (count times surface area), so the
+// budget holds without any shared counter, and the tree is the same on any number of
+// threads. A subtree of fewer than
+// parallel_threshold references is built by one task, left child first, and the room its
+// left child leaves unused goes to the right one (so parallel_threshold shapes the tree;
+// the number of threads does not). Leaf boxes and inner boxes are refitted to the final
+// references.
 SpatialSplitResult build_spatial_split(const Mesh& mesh, const PrimitiveRefs& refs,
                                        const SpatialSplitConfig& config = {});
 
