@@ -91,9 +91,10 @@ struct BakeResult {
 // optimizes depends on the build's leaves: from leaves of one it reaches the lowest final
 // cost on the scanned and character meshes, from the SBVH's own SAH leaves (up to 8) on
 // the architectural scenes and the CAD engine, where the collapse after a one-per-leaf
-// optimization undoes part of its gain (Sponza 144.41 from leaves of one, 142.45 from
-// leaves of up to 8; 142.86 at 4, 142.69 at 16). Neither start wins everywhere, and both
-// converge in seconds on the shared scenes, so best runs both and keeps the cheaper.
+// optimization undoes part of its gain (Sponza 142.85 from leaves of one, 141.87 from
+// leaves of up to 8; with an earlier builder 142.86 at 4, 142.45 at 8, 142.69 at 16; the
+// table is in docs/spatial-splits.md). Neither start wins everywhere, and both converge in
+// seconds on the shared scenes, so best runs both and keeps the cheaper.
 std::vector<uint32_t> default_start_leaf_sizes(const std::string& quality) {
   return quality == "best" ? std::vector<uint32_t>{1, 8} : std::vector<uint32_t>{1};
 }
