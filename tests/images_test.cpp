@@ -171,8 +171,12 @@ void expect_monotone_bar(const LegendImage& legend, const ColorKey& key) {
     const float v = nearest_value(key, pixel(legend.image, x, legend.bar.y + row), lo);
     EXPECT_LE(v, previous + 1e-3f * key.max) << "row " << row;
     previous = v;
-    if (row == 0) EXPECT_NEAR(v, key.max, 0.02f * (key.max - lo));
-    if (row + 1 == legend.bar.height) EXPECT_NEAR(v, lo, 0.02f * (key.max - lo));
+    if (row == 0) {
+      EXPECT_NEAR(v, key.max, 0.02f * (key.max - lo));
+    }
+    if (row + 1 == legend.bar.height) {
+      EXPECT_NEAR(v, lo, 0.02f * (key.max - lo));
+    }
   }
 }
 

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <optional>
 #include <string>
+#include <type_traits>
 
 #include "bindings.h"
 #include "bvhopt/any_tracer.h"
@@ -51,7 +52,9 @@ struct TraceResult {
 std::vector<Ray> rays_from(const py::array_t<float, py::array::c_style | py::array::forcecast>& array) {
   require_columns(array, 8, "trace: rays");
   std::vector<Ray> rays(static_cast<size_t>(array.shape(0)));
-  if (!rays.empty()) std::memcpy(rays.data(), array.data(), rays.size() * sizeof(Ray));
+  // Eight floats a ray, in the array's column order (checked above and in ray.h).
+  static_assert(std::is_trivially_copyable_v<Ray> && sizeof(Ray) == 8 * sizeof(float));
+  if (!rays.empty()) std::memcpy(static_cast<void*>(rays.data()), array.data(), rays.size() * sizeof(Ray));
   return rays;
 }
 
