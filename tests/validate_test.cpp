@@ -320,8 +320,28 @@ TEST(Renumber, InPlaceEqualsACopyInDepthFirstOrder) {
   for (uint32_t trial = 0; trial < 40; ++trial) {
     PrimitiveRefs refs = testing::random_refs(50 + trial * 37, 300 + trial);
     Bvh bvh = build_sweep_sah(refs);
-    // Shuffle the numbering and leave a few unreachable nodes (a detached subtree's parent).
     std::mt19937 rng(trial);
+    if (trial % 3 == 2) {
+      // As collapse_leaves leaves it: some subtrees made leaves of all their slots (the sweep
+      // builder gives every subtree a contiguous range), their nodes below unreachable and,
+      // after the shuffle, spread among the reachable ones.
+      for (uint32_t n = 1; n < bvh.nodes.size(); ++n) {
+        if (bvh.nodes[n].is_leaf() || rng() % 8 != 0) continue;
+        uint32_t lo = ~0u, hi = 0;
+        std::vector<uint32_t> todo{n};
+        while (!todo.empty()) {
+          const BvhNode& c = bvh.nodes[todo.back()];
+          todo.pop_back();
+          if (c.is_leaf()) {
+            lo = std::min(lo, c.first_ref()), hi = std::max(hi, c.first_ref() + c.ref_count());
+          } else {
+            todo.push_back(c.left()), todo.push_back(c.right());
+          }
+        }
+        bvh.nodes[n].make_leaf(lo, hi - lo);
+      }
+    }
+    // Shuffle the numbering and leave a few unreachable nodes (a detached subtree's parent).
     std::vector<uint32_t> perm(bvh.nodes.size());
     for (uint32_t i = 0; i < perm.size(); ++i) perm[i] = i;
     std::shuffle(perm.begin(), perm.end(), rng);

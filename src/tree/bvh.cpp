@@ -98,20 +98,32 @@ void Bvh::renumber_depth_first() {
   }
   const uint32_t reachable = next;
   for (uint32_t i = 0; i < nodes.size(); ++i) {
-    if (new_index[i] == kInvalidNode) {
-      new_index[i] = next++;  // unreachable: moved past the end, then dropped
-      continue;
-    }
+    if (new_index[i] == kInvalidNode) continue;  // unreachable: dropped
     BvhNode& nd = nodes[i];
     if (nd.parent != kInvalidNode) nd.parent = new_index[nd.parent];
     if (!nd.is_leaf()) nd.make_inner(new_index[nd.left()], new_index[nd.right()]);
   }
-  // The permutation applied cycle by cycle: each swap puts one node in its final place.
+  // Each reachable node is carried to its place; the node found there is carried on in
+  // turn, until the place held an unreachable node or one already carried away (a hole:
+  // nothing to keep). Unreachable nodes are never moved: after a collapse, most of the
+  // tree's nodes are unreachable and every reachable one moves down a little, so each chain
+  // is one move and the whole pass streams through the array; sending the unreachable
+  // ones past the end instead made every other move a jump across it (as long as the
+  // collapse itself at 2M triangles).
+  constexpr uint32_t kHole = kInvalidNode;
   for (uint32_t i = 0; i < nodes.size(); ++i) {
-    while (new_index[i] != i) {
-      const uint32_t j = new_index[i];
-      std::swap(nodes[i], nodes[j]);
-      std::swap(new_index[i], new_index[j]);
+    if (new_index[i] == kHole || new_index[i] == i) continue;
+    BvhNode carry = nodes[i];
+    uint32_t to = new_index[i];
+    new_index[i] = kHole;
+    for (;;) {
+      const BvhNode found = nodes[to];
+      const uint32_t next_to = new_index[to];
+      nodes[to] = carry;
+      new_index[to] = to;
+      if (next_to == kHole) break;
+      carry = found;
+      to = next_to;
     }
   }
   nodes.resize(reachable);
