@@ -107,23 +107,56 @@ void Bvh::renumber_depth_first() {
   // turn, until the place held an unreachable node or one already carried away (a hole:
   // nothing to keep). Unreachable nodes are never moved: after a collapse, most of the
   // tree's nodes are unreachable and every reachable one moves down a little, so each chain
-  // is one move and the whole pass streams through the array; sending the unreachable
-  // ones past the end instead made every other move a jump across it (as long as the
-  // collapse itself at 2M triangles).
+  // is one move and the pass streams through the array (sending the unreachable ones past
+  // the end instead made every other move a jump across it: as long as the collapse itself
+  // at 2M triangles). After an optimizer the places are scattered and every step of a chain
+  // is a cache miss that the next step waits for, so kCarriers chains advance in turn, each
+  // step asking for the next one's place ahead. That is safe: a place is the target of one
+  // node only, so only its carrier writes it, and a chain that reaches a place whose node
+  // another chain took away finds a hole there and ends.
   constexpr uint32_t kHole = kInvalidNode;
-  for (uint32_t i = 0; i < nodes.size(); ++i) {
-    if (new_index[i] == kHole || new_index[i] == i) continue;
-    BvhNode carry = nodes[i];
-    uint32_t to = new_index[i];
-    new_index[i] = kHole;
-    for (;;) {
-      const BvhNode found = nodes[to];
-      const uint32_t next_to = new_index[to];
-      nodes[to] = carry;
-      new_index[to] = to;
-      if (next_to == kHole) break;
-      carry = found;
-      to = next_to;
+  constexpr int kCarriers = 8;
+  struct Carrier {
+    BvhNode node;
+    uint32_t to = kHole;
+  };
+  Carrier carriers[kCarriers];
+  const uint32_t count = static_cast<uint32_t>(nodes.size());
+  uint32_t scan = 0;
+  auto ask_for = [&](uint32_t i) {
+    const char* p = reinterpret_cast<const char*>(nodes.data() + i);
+    __builtin_prefetch(p, 1);
+    __builtin_prefetch(p + sizeof(BvhNode) - 1, 1);
+    __builtin_prefetch(new_index.data() + i, 1);
+  };
+  // Takes the next node not yet in place out of the array (its place becomes a hole).
+  auto start = [&](Carrier& c) {
+    while (scan < count && (new_index[scan] == kHole || new_index[scan] == scan)) ++scan;
+    if (scan == count) return false;
+    c.node = nodes[scan];
+    c.to = new_index[scan];
+    new_index[scan] = kHole;
+    ++scan;
+    ask_for(c.to);
+    return true;
+  };
+  int active = 0;
+  for (Carrier& c : carriers) active += start(c) ? 1 : 0;
+  while (active > 0) {
+    for (Carrier& c : carriers) {
+      if (c.to == kHole) continue;
+      const BvhNode found = nodes[c.to];
+      const uint32_t next_to = new_index[c.to];
+      nodes[c.to] = c.node;
+      new_index[c.to] = c.to;
+      if (next_to != kHole) {
+        c.node = found;
+        c.to = next_to;
+        ask_for(c.to);
+      } else if (!start(c)) {
+        c.to = kHole;
+        --active;
+      }
     }
   }
   nodes.resize(reachable);
