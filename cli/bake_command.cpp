@@ -122,7 +122,7 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, const SceneBuilde
   InsertionConfig insertion;
   insertion.cost = cost;
   insertion.limits.time_limit = s.budget_seconds;
-  GainEstimate gain(sah_cost(s.bvh, cost));
+  GainEstimate gain(s.cost_built);
   insertion.limits.on_pass = [&](const PassRecord& p) {
     gain.add(p.best_cost);
     progress.update("optimizing" + label + ": " + progress_text(p, gain, false));
