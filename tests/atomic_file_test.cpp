@@ -28,7 +28,11 @@ std::string slurp(const fs::path& p) {
 class AtomicFile : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("bvhopt_atomic_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
+    // ctest runs each test in its own process, two at a time: the process id
+    // and the test's name keep two tests from emptying each other's folder.
+    const ::testing::TestInfo* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() /
+           ("bvhopt_atomic_" + std::to_string(::getpid()) + "_" + info->name());
     fs::remove_all(dir_);
     fs::create_directories(dir_);
   }
