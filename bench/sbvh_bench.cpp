@@ -16,10 +16,13 @@
 // peer figures (tinybvh BuildHQ + Optimize(50, extreme), or Embree HIGH; c_T = 3, c_I = 2).
 //
 // --compare: the edge volume heuristic beside spatial splits, per scene unrotated and
-// rotated by (30, 30, 0): sweep, sweep + EVH, SBVH, SBVH + EVH and SBVH with SAH leaves of
-// up to 8 (bake --quality best's second start; its cost counts those leaves), each built
-// (median of --runs) and then optimized by insertion (--opt-seconds each, default 20):
-// references per triangle, cost, build time and rays per second of the optimized tree in
+// rotated by (30, 30, 0): sweep, sweep + EVH, SBVH, SBVH + EVH, and the other starts of bake
+// --quality best: SAH leaves of up to 8 from sweep and SBVH, and SBVH with spatial splits
+// only in nodes of at most 256 references (their costs count those leaves), each built
+// (median of --runs), optimized by insertion (--opt-seconds each, default 20) and collapsed
+// into leaves as bake does (ocost); per scene, the split and the unsplit start of least
+// ocost (what bake --quality best keeps, with sbvh and with sweep) side by side:
+// references per triangle, cost, build time and rays per second of the collapsed tree in
 // the bvh8 layout (primary and random rays made once per scene from the sweep tree, the same
 // for all; --ray-threads threads, default 1; the trees traced in turn, pass after pass,
 // median of --ray-passes passes, default 11, CPU time over the thread count, with the
@@ -45,6 +48,7 @@
 #include "bench_support.h"
 #include "bvhopt/any_tracer.h"
 #include "bvhopt/build.h"
+#include "bvhopt/collapse_leaves.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/edge_volume_subdivision.h"
 #include "bvhopt/error.h"
@@ -98,6 +102,7 @@ struct Options {
   int ray_passes = 11;
   int ray_threads = 1;
   std::string json_path;
+  CostModel cost;
 };
 
 Options parse(int argc, char** argv) {
@@ -115,6 +120,8 @@ Options parse(int argc, char** argv) {
     else if (a == "--opt-seconds") o.opt_seconds = std::stod(args.value());
     else if (a == "--no-embree") o.embree = false;
     else if (a == "--compare") o.compare = true;
+    else if (a == "--c-t") o.cost.traversal = std::stod(args.value());
+    else if (a == "--c-i") o.cost.intersection = std::stod(args.value());
     else if (a == "--rays") o.rays = std::stoull(args.value());
     else if (a == "--ray-passes") o.ray_passes = std::max(1, std::stoi(args.value()));
     else if (a == "--ray-threads") o.ray_threads = std::max(1, std::stoi(args.value()));
@@ -307,14 +314,19 @@ nlohmann::json run_scene(const Options& opt, const std::string& spec) {
   const OptimizeReport rep = optimize_insertion(ours.bvh, ic);
   const double cost_opt = sah_cost(ours.bvh, ours.refs, cost);
   const double ocost_one = optimal_collapse_cost(ours.bvh, ours.refs, cost);
-  // bake --quality best's second start: the SBVH's own SAH leaves of up to 8, optimized by
-  // insertion, then collapsed; best keeps the cheaper of the two collapsed trees.
+  // bake --quality best's other starts: the SBVH's own SAH leaves of up to 8, and those with
+  // spatial splits only in nodes of at most 256 references, each optimized by insertion, then
+  // collapsed; best keeps the cheapest of the three collapsed trees.
   SpatialSplitConfig leafy = config;
   leafy.leaf.max_leaf_size = 8;
   SpatialSplitResult eight = build_spatial_split(mesh, refs, leafy);
   const OptimizeReport rep8 = optimize_insertion(eight.bvh, ic);
   const double ocost_eight = optimal_collapse_cost(eight.bvh, eight.refs, cost);
-  const double ocost_opt = std::min(ocost_one, ocost_eight);
+  leafy.spatial_max = 256;
+  SpatialSplitResult limited = build_spatial_split(mesh, refs, leafy);
+  const OptimizeReport rep256 = optimize_insertion(limited.bvh, ic);
+  const double ocost_limited = optimal_collapse_cost(limited.bvh, limited.refs, cost);
+  const double ocost_opt = std::min({ocost_one, ocost_eight, ocost_limited});
 
   const double wall = median(ours_wall), cpu = median(ours_cpu);
   const double pwall = median(peer_wall), pcpu = median(peer_cpu);
@@ -342,6 +354,8 @@ nlohmann::json run_scene(const Options& opt, const std::string& spec) {
           {"optimize_seconds", rep.seconds},
           {"leaf8_optimized_ocost", ocost_eight},
           {"leaf8_optimize_seconds", rep8.seconds},
+          {"leaf8_spatial_max256_optimized_ocost", ocost_limited},
+          {"leaf8_spatial_max256_optimize_seconds", rep256.seconds},
           {"best_ocost", ocost_opt},
           {"embree_high",
            {{"refs_per_triangle", have_peer ? peer.refs.size() / tris : 0.0},
@@ -360,23 +374,29 @@ struct Variant {
   BuilderKind kind;
   bool evh;
   uint32_t leaf_size = 1;  // 8: bake --quality best's second start
+  uint32_t spatial_max = 0;  // 256: its starts with spatial splits only in small nodes
 };
 
 nlohmann::json compare_scene(const Options& opt, const std::string& spec, float angle) {
-  const CostModel cost;
+  const CostModel cost = opt.cost;
   Mesh mesh = load_scene(spec);
   if (angle != 0.0f) rotate_mesh(mesh, Vec3(angle, angle, 0.0f));
   const double tris = double(mesh.triangle_count());
   const std::string name = scene_name(spec) + (angle != 0.0f ? " rot" : "");
   ThreadLimit limit(opt.threads);
+  // The starts of bake --quality best (with --builder sweep for the unsplit ones), and each
+  // builder with edge volume subdivision first.
   const Variant variants[] = {{"sweep", BuilderKind::sweep_sah, false},
+                              {"sweep-l8", BuilderKind::sweep_sah, false, 8},
                               {"sweep+evh", BuilderKind::sweep_sah, true},
                               {"sbvh", BuilderKind::spatial_split, false},
-                              {"sbvh+evh", BuilderKind::spatial_split, true},
-                              {"sbvh-l8", BuilderKind::spatial_split, false, 8}};
+                              {"sbvh-l8", BuilderKind::spatial_split, false, 8},
+                              {"sbvh-l8-m256", BuilderKind::spatial_split, false, 8, 256},
+                              {"sbvh+evh", BuilderKind::spatial_split, true}};
   constexpr size_t kVariants = std::size(variants);
   std::vector<Ray> rays[2];
   std::vector<std::unique_ptr<WideTracer>> tracers;
+  std::vector<double> ocosts;
   nlohmann::json out = nlohmann::json::array();
   for (const Variant& v : variants) {
     BuildOptions bo;
@@ -385,6 +405,7 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     bo.sbvh.budget = opt.budget;
     bo.sbvh.alpha = opt.alpha;
     bo.sbvh.spatial_bins = opt.spatial_bins;
+    bo.sbvh.spatial_max = v.spatial_max;
     bo.leaf.max_leaf_size = v.leaf_size;
     BuiltTree tree;
     std::vector<double> walls;
@@ -398,6 +419,11 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     ic.limits.time_limit = opt.opt_seconds > 0 ? opt.opt_seconds : 20.0;
     const OptimizeReport rep = optimize_insertion(tree.bvh, ic);
     const double optimized = sah_cost(tree.bvh, tree.refs, cost);
+    // As bake: subtrees collapsed into leaves where cheaper, each triangle once in a leaf.
+    CollapseConfig cc;
+    cc.cost = cost;
+    const double collapsed = collapse_leaves(tree.bvh, tree.refs, cc).cost_after;
+    ocosts.push_back(collapsed);
     const FlatBvh flat = finalize(tree.bvh, tree.refs);
     if (rays[0].empty()) {
       const Tracer tracer(flat, mesh);
@@ -418,9 +444,10 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
                    {"build_seconds", median(walls)},
                    {"cost", built},
                    {"optimized_cost", optimized},
+                   {"ocost", collapsed},
                    {"optimize_seconds", rep.seconds}});
   }
-  // The four trees are traced in turn, pass after pass (A, B, C, D, A, B, ...), so that a
+  // The trees are traced in turn, pass after pass (A, B, C, D, A, B, ...), so that a
   // change in the machine's load falls on all of them alike; each figure is the median of
   // its passes. On this shared VM one tree's rate moved by up to 76 % between two runs of
   // three back-to-back passes each, which flipped most split-against-unsplit verdicts.
@@ -469,13 +496,31 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     row["wide_blocks"] = tracers[v]->layout().stats().blocks;
     row["ray_passes"] = opt.ray_passes;
     row["ray_threads"] = opt.ray_threads;
-    std::printf("%-22s %-10s %7.3f %9.1f %9.2f %9.2f %8.1f %9.2f %9.2f %5.0f%% %5.0f%% %6.2f %6.2f %6.2f %6.2f %7.1f\n",
+    row["wide_sah_cost"] = tracers[v]->layout().stats().sah_cost;
+    std::printf("%-22s %-12s %7.3f %9.1f %9.2f %9.2f %8.2f %6.1f %9.2f %9.2f %5.0f%% %5.0f%% %6.2f %6.2f %6.2f %6.2f %7.3f %7.1f\n",
                 name.c_str(), variants[v].name, row["refs_per_triangle"].get<double>(),
                 row["build_seconds"].get<double>() * 1e3, row["cost"].get<double>(),
-                row["optimized_cost"].get<double>(), row["optimize_seconds"].get<double>(), mrays[0], mrays[1],
-                100.0 * spread(rates[v][0]), 100.0 * spread(rates[v][1]), steps[v][0], tests[v][0], steps[v][1],
-                tests[v][1], double(tracers[v]->layout().stats().bytes) / (1 << 20));
+                row["optimized_cost"].get<double>(), ocosts[v], row["optimize_seconds"].get<double>(), mrays[0],
+                mrays[1], 100.0 * spread(rates[v][0]), 100.0 * spread(rates[v][1]), steps[v][0], tests[v][0],
+                steps[v][1], tests[v][1], tracers[v]->layout().stats().sah_cost,
+                double(tracers[v]->layout().stats().bytes) / (1 << 20));
   }
+  // What bake --quality best keeps, with and without spatial splits: the start of the lowest
+  // ocost among the sbvh ones and among the sweep ones (no EVH), and their rays side by side.
+  size_t best[2] = {kVariants, kVariants};  // unsplit, split
+  for (size_t v = 0; v < kVariants; ++v) {
+    if (variants[v].evh) continue;
+    size_t& b = best[variants[v].kind == BuilderKind::spatial_split];
+    if (b == kVariants || ocosts[v] < ocosts[b]) b = v;
+  }
+  for (size_t v = 0; v < kVariants; ++v) {
+    out[v]["best_unsplit"] = v == best[0];
+    out[v]["best_split"] = v == best[1];
+  }
+  const auto mr = [&](size_t v, int k) { return median(rates[v][k]); };
+  std::printf("%-22s best split %s (ocost %.2f) / best unsplit %s (ocost %.2f): primary %.3f, random %.3f\n",
+              name.c_str(), variants[best[1]].name, ocosts[best[1]], variants[best[0]].name, ocosts[best[0]],
+              ratio(mr(best[1], 0), mr(best[0], 0)), ratio(mr(best[1], 1), mr(best[0], 1)));
   std::fflush(stdout);
   return out;
 }
@@ -488,9 +533,9 @@ int run(int argc, char** argv) {
                 "on %d thread(s) = rays over CPU time (the thread's on one) / threads, median of %d interleaved passes "
                 "(iqr: interquartile range over the median); steps and triangle tests per ray\n",
                 opt.threads, opt.budget, opt.opt_seconds > 0 ? opt.opt_seconds : 20.0, opt.ray_threads, opt.ray_passes);
-    std::printf("%-22s %-10s %7s %9s %9s %9s %8s %9s %9s %6s %6s %6s %6s %6s %6s %7s\n", "scene", "variant", "ref/tri",
-                "build ms", "cost", "opt cost", "opt s", "prim Mr/s", "rand Mr/s", "p iqr", "r iqr", "p stp", "p tst",
-                "r stp", "r tst", "MiB");
+    std::printf("%-22s %-12s %7s %9s %9s %9s %8s %6s %9s %9s %6s %6s %6s %6s %6s %6s %7s %7s\n", "scene", "variant",
+                "ref/tri", "build ms", "cost", "opt cost", "ocost", "opt s", "prim Mr/s", "rand Mr/s", "p iqr", "r iqr",
+                "p stp", "p tst", "r stp", "r tst", "wideSAH", "MiB");
     for (const std::string& spec : scene_specs(opt.scenes))
       for (float angle : opt.rotations)
         for (auto& row : compare_scene(opt, spec, angle)) all.push_back(row);

@@ -2,15 +2,18 @@
 // spatial splits for --quality best (one reference per leaf, what the optimizer does best
 // with; --builder overrides), optimizes with insertion under a
 // time budget, collapses subtrees into leaves where cheaper, and writes the file, with the
-// cost, the time and the peak memory of every step. --quality best runs this from two
-// starts, leaves of one and the builder's SAH leaves of up to 8, and keeps the cheaper
-// tree (default_start_leaf_sizes says why).
+// cost, the time and the peak memory of every step. --quality best runs this from three
+// starts, leaves of one, the builder's SAH leaves of up to 8, and those again with spatial
+// splits only in nodes of at most 256 references, and keeps the cheapest tree
+// (default_starts says why).
 //
 // The quality levels differ in the optimizer's default budget, as a multiple of the
 // build time (the insertion optimizer makes most of its gain early, docs in README), and
 // best in its builder (docs/spatial-splits.md).
 #include <sys/resource.h>
 
+#include <algorithm>
+#include <cctype>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -39,6 +42,7 @@ struct BakeOptions {
   std::string quality = "balanced";
   std::string time_budget;  // empty: the quality's default
   std::vector<uint32_t> start_leaf_sizes;  // empty: the quality's
+  std::vector<std::string> starts;         // LEAF[:SPATIAL_MAX] each; empty: the above
   std::string output;
   bool json = false;
 };
@@ -62,10 +66,19 @@ uint64_t peak_rss_bytes() {
   return static_cast<uint64_t>(usage.ru_maxrss) * 1024u;
 }
 
-// One start of the pipeline: the build with leaves of up to `leaf_size` references (1: one
-// per leaf; more: the builder's SAH leaf test decides), insertion, the collapse.
+// Where a start begins: the build's largest leaf (1: one reference per leaf; more: the
+// builder's SAH leaf test decides) and, for sbvh, the largest node that tries spatial
+// splits (0: every node, SpatialSplitParams::spatial_max).
+struct StartSpec {
+  uint32_t leaf_size = 1;
+  uint32_t spatial_max = 0;
+  bool operator==(const StartSpec&) const = default;
+};
+
+// One start of the pipeline: the build, insertion, the collapse.
 struct BakeStart {
   uint32_t leaf_size = 1;
+  uint32_t spatial_max = 0;
   double build_seconds = 0.0, optimize_seconds = 0.0, collapse_seconds = 0.0;
   double budget_seconds = 0.0;  // the optimizer's (0: until it converges)
   double cost_built = 0.0, cost_optimized = 0.0, cost_final = 0.0;
@@ -87,28 +100,84 @@ struct BakeResult {
   const BakeStart& best() const { return starts[kept]; }
 };
 
-// The leaf sizes --quality best starts from. Insertion moves whole leaves, so what it
-// optimizes depends on the build's leaves: from leaves of one it reaches the lowest final
-// cost on the scanned and character meshes, from the SBVH's own SAH leaves (up to 8) on
-// the architectural scenes and the CAD engine, where the collapse after a one-per-leaf
-// optimization undoes part of its gain (Sponza 142.85 from leaves of one, 141.87 from
-// leaves of up to 8; with an earlier builder 142.86 at 4, 142.45 at 8, 142.69 at 16; the
-// table is in docs/spatial-splits.md). Neither start wins everywhere, and both converge in
-// seconds on the shared scenes, so best runs both and keeps the cheaper.
-std::vector<uint32_t> default_start_leaf_sizes(const std::string& quality) {
-  return quality == "best" ? std::vector<uint32_t>{1, 8} : std::vector<uint32_t>{1};
+// The starts of --quality best. Insertion moves whole leaves, so what it optimizes depends
+// on the build's leaves: from leaves of one it reaches the lowest final cost on the scanned
+// and character meshes, from the SBVH's own SAH leaves (up to 8) on the architectural
+// scenes and the CAD engine, where the collapse after a one-per-leaf optimization undoes
+// part of its gain (Sponza 142.85 from leaves of one, 141.87 from leaves of up to 8; with
+// an earlier builder 142.86 at 4, 142.45 at 8, 142.69 at 16). Insertion also never merges
+// a triangle's pieces again, so the spatial splits the greedy build makes near the root
+// stay: with them only in nodes of at most 256 references, Conference reaches 75.33
+// instead of 76.94 and staircase 35.14 instead of 36.81, and their rays are faster (fewer
+// nodes per ray); Sponza and the CAD engine lose (144.41, 226.30). The tables are in
+// docs/spatial-splits.md. No start wins everywhere, and all converge in seconds on the
+// shared scenes, so best runs them all and keeps the cheapest.
+std::vector<StartSpec> default_starts(const std::string& quality) {
+  if (quality != "best") return {{1, 0}};
+  return {{1, 0}, {8, 0}, {8, 256}};
+}
+
+// "8" or "8:256" (leaf size, spatial_max).
+StartSpec parse_start(const std::string& text) {
+  const size_t colon = text.find(':');
+  const auto number = [&](const std::string& part, uint64_t lo, uint64_t hi) {
+    size_t used = 0;
+    uint64_t v = 0;
+    bool ok = !part.empty() && std::isdigit(static_cast<unsigned char>(part[0]));
+    if (ok) {
+      try {
+        v = std::stoull(part, &used);
+      } catch (const std::exception&) {
+        ok = false;
+      }
+    }
+    if (!ok || used != part.size() || v < lo || v > hi)
+      throw Error("'" + text + "' is not LEAF[:SPATIAL_MAX] (LEAF 1 to 65535, SPATIAL_MAX 0 to 4294967295)");
+    return static_cast<uint32_t>(v);
+  };
+  StartSpec s;
+  s.leaf_size = number(text.substr(0, colon), 1, 65535);
+  if (colon != std::string::npos) s.spatial_max = number(text.substr(colon + 1), 0, 0xffffffffu);
+  return s;
+}
+
+// The starts this bake runs: --starts, else --start-leaf-sizes (each with the builder's
+// --spatial-max), else the quality's. spatial_max means nothing to other builders than
+// sbvh, so there it is 0 and a start equal to an earlier one is dropped.
+std::vector<StartSpec> starts_of(const BakeOptions& opt, const SceneBuilderOption& builder) {
+  std::vector<StartSpec> wanted;
+  if (!opt.starts.empty())
+    for (const std::string& t : opt.starts) wanted.push_back(parse_start(t));
+  else if (!opt.start_leaf_sizes.empty())
+    for (uint32_t leaf : opt.start_leaf_sizes) wanted.push_back({leaf, builder.sbvh.spatial_max});
+  else
+    wanted = default_starts(opt.quality);
+  std::vector<StartSpec> out;
+  for (StartSpec s : wanted) {
+    if (builder.name != "sbvh") s.spatial_max = 0;
+    if (std::find(out.begin(), out.end(), s) == out.end()) out.push_back(s);
+  }
+  return out;
+}
+
+std::string start_text(const StartSpec& s) {
+  std::string text = "leaves of up to " + std::to_string(s.leaf_size);
+  if (s.spatial_max) text += ", spatial splits in nodes of at most " + std::to_string(s.spatial_max) + " references";
+  return text;
 }
 
 // `share`: this start's part of a --time-budget given in seconds (a multiple of the build
 // time, or the quality's, applies to each start's own build).
-BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, const SceneBuilderOption& builder, uint32_t leaf_size,
+BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOption builder, const StartSpec& spec,
                      double share, ProgressLine& progress, const std::string& label) {
   BakeStart s;
-  s.leaf_size = leaf_size;
+  s.leaf_size = spec.leaf_size;
+  s.spatial_max = spec.spatial_max;
+  builder.sbvh.spatial_max = spec.spatial_max;
   progress.update("building " + std::to_string(mesh.triangle_count()) + " triangles" + label, true);
   const CostModel cost = opt.cost.model();
   Stopwatch build_clock;
-  BuiltTree built = builder.build(mesh, make_references(mesh), cost, leaf_size);
+  BuiltTree built = builder.build(mesh, make_references(mesh), cost, spec.leaf_size);
   s.bvh = std::move(built.bvh);
   s.refs = std::move(built.refs);
   s.references = s.refs.size();
@@ -161,14 +230,13 @@ BakeResult bake(const BakeOptions& opt) {
   SceneBuilderOption builder = opt.builder;
   if (builder.name.empty()) builder.name = builder_for(opt.quality);
   r.builder = builder.name;
-  const std::vector<uint32_t> leaf_sizes =
-      opt.start_leaf_sizes.empty() ? default_start_leaf_sizes(opt.quality) : opt.start_leaf_sizes;
-  for (size_t k = 0; k < leaf_sizes.size(); ++k) {
+  const std::vector<StartSpec> specs = starts_of(opt, builder);
+  for (size_t k = 0; k < specs.size(); ++k) {
     const std::string label =
-        leaf_sizes.size() > 1 ? " (start " + std::to_string(k + 1) + " of " + std::to_string(leaf_sizes.size()) +
-                                    ", leaves of up to " + std::to_string(leaf_sizes[k]) + ")"
-                              : std::string();
-    BakeStart s = bake_start(opt, mesh, builder, leaf_sizes[k], 1.0 / double(leaf_sizes.size()), progress, label);
+        specs.size() > 1 ? " (start " + std::to_string(k + 1) + " of " + std::to_string(specs.size()) + ", " +
+                               start_text(specs[k]) + ")"
+                         : std::string();
+    BakeStart s = bake_start(opt, mesh, builder, specs[k], 1.0 / double(specs.size()), progress, label);
     r.budget_seconds += s.budget_seconds;
     r.starts.push_back(std::move(s));
     BakeStart& last = r.starts.back();
@@ -199,6 +267,7 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
   for (const BakeStart& s : r.starts) {
     build += s.build_seconds, optimize += s.optimize_seconds, collapse += s.collapse_seconds;
     starts.push_back({{"leaf_size", s.leaf_size},
+                      {"spatial_max", s.spatial_max},
                       {"references", s.references},
                       {"build_seconds", s.build_seconds},
                       {"time_budget_seconds", s.budget_seconds},
@@ -229,6 +298,7 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
               {"stop_reason", std::string(stop_reason_name(best.report.stop_reason))},
               {"leaves", best.leaves},
               {"start_leaf_size", best.leaf_size},
+              {"start_spatial_max", best.spatial_max},
               {"starts", starts},
               {"peak_rss_bytes", r.peak_rss},
               {"output", opt.output}});
@@ -241,8 +311,8 @@ void print_bake_summary(const BakeOptions& opt, const BakeResult& r) {
   for (size_t k = 0; k < r.starts.size(); ++k) {
     const BakeStart& s = r.starts[k];
     if (r.starts.size() > 1)
-      std::cout << "start " << k + 1 << "    leaves of up to " << s.leaf_size << (k == r.kept ? " (kept: lowest cost)" : "")
-                << "\n";
+      std::cout << "start " << k + 1 << "    " << start_text({s.leaf_size, s.spatial_max})
+                << (k == r.kept ? " (kept: lowest cost)" : "") << "\n";
     std::cout << "build      " << r.builder << " (" << s.references << " references), cost "
               << format_double(s.cost_built, 4) << ", " << format_double(s.build_seconds, 2) << " s\n"
               << "optimize   insertion, cost " << format_double(s.cost_optimized, 4) << ", "
@@ -277,12 +347,29 @@ void register_bake_command(CLI::App& app) {
   cmd->add_option("--time-budget", opt->time_budget,
                   "The optimizer's budget instead of the quality's, in seconds or as a multiple of the build time: 3x")
       ->type_name("S|Nx");
-  cmd->add_option("--start-leaf-sizes", opt->start_leaf_sizes,
-                  "Build, optimize and collapse from each of these leaf sizes and keep the cheapest tree "
-                  "(default: 1,8 for --quality best, 1 otherwise); a --time-budget in seconds is shared among them")
+  CLI::Option* leaf_sizes =
+      cmd->add_option("--start-leaf-sizes", opt->start_leaf_sizes,
+                      "Build, optimize and collapse from each of these leaf sizes (with --spatial-max) and keep the "
+                      "cheapest tree; a --time-budget in seconds is shared among them (default: see --starts)")
+          ->delimiter(',')
+          ->check(CLI::Range(1u, 65535u))
+          ->type_name("N,...");
+  cmd->add_option("--starts", opt->starts,
+                  "As --start-leaf-sizes, each start a leaf size and, for sbvh, the largest node that tries spatial "
+                  "splits (0: all). Default: 1,8,8:256 for --quality best, 1 otherwise")
       ->delimiter(',')
-      ->check(CLI::Range(1u, 65535u))
-      ->type_name("N,...");
+      ->type_name("LEAF[:SPATIAL_MAX],...")
+      ->check(
+          [](const std::string& text) {
+            try {
+              parse_start(text);
+              return std::string();
+            } catch (const Error& e) {
+              return std::string(e.what());
+            }
+          },
+          "LEAF[:SPATIAL_MAX]")
+      ->excludes(leaf_sizes);
   opt->cost.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_option("-o,--output", opt->output, "BVH file to write")->required();

@@ -25,6 +25,10 @@ void add_budget_option(CLI::App* app, SpatialSplitParams& params) {
                   "sbvh: nodes of fewer references take object splits only (0: spatial splits everywhere)")
       ->check(whole_number(0, kMaxReferences))
       ->capture_default_str();
+  app->add_option("--spatial-max", params.spatial_max,
+                  "sbvh: nodes of more references take object splits only (0: no limit)")
+      ->check(whole_number(0, kMaxReferences))
+      ->capture_default_str();
 }
 
 void SceneBuilderOption::add_to(CLI::App* app) {

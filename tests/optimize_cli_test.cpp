@@ -132,14 +132,23 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
   EXPECT_LT(j["cost_optimized"].get<double>(), j["cost_built"].get<double>());
   EXPECT_LE(j["cost"].get<double>(), j["cost_optimized"].get<double>());
   EXPECT_GT(j["peak_rss_bytes"].get<uint64_t>(), 0u);
-  // Best runs from leaves of one and from the builder's SAH leaves of up to 8 and keeps the
-  // cheaper tree: the reported cost, start and file are that start's.
-  ASSERT_EQ(j["starts"].size(), 2u);
+  // Best runs from leaves of one, from the builder's SAH leaves of up to 8, and from those
+  // with spatial splits only in nodes of at most 256 references, and keeps the cheapest
+  // tree: the reported cost, start and file are that start's.
+  ASSERT_EQ(j["starts"].size(), 3u);
   EXPECT_EQ(j["starts"][0]["leaf_size"], 1);
   EXPECT_EQ(j["starts"][1]["leaf_size"], 8);
-  const double c1 = j["starts"][0]["cost"].get<double>(), c8 = j["starts"][1]["cost"].get<double>();
-  EXPECT_EQ(j["cost"].get<double>(), std::min(c1, c8));
-  EXPECT_EQ(j["start_leaf_size"], c8 < c1 ? 8 : 1);
+  EXPECT_EQ(j["starts"][2]["leaf_size"], 8);
+  EXPECT_EQ(j["starts"][0]["spatial_max"], 0);
+  EXPECT_EQ(j["starts"][1]["spatial_max"], 0);
+  EXPECT_EQ(j["starts"][2]["spatial_max"], 256);
+  const double c1 = j["starts"][0]["cost"].get<double>(), c8 = j["starts"][1]["cost"].get<double>(),
+               c256 = j["starts"][2]["cost"].get<double>();
+  EXPECT_NE(c256, c8) << "the limited start builds another tree";
+  const double cheapest = std::min({c1, c8, c256});
+  EXPECT_EQ(j["cost"].get<double>(), cheapest);
+  EXPECT_EQ(j["start_leaf_size"], cheapest == c1 ? 1 : 8);
+  EXPECT_EQ(j["start_spatial_max"], cheapest == c256 && cheapest < c8 && cheapest < c1 ? 256 : 0);
   EXPECT_LT(j["starts"][0]["cost"].get<double>(), j["starts"][0]["cost_optimized"].get<double>());  // collapsing one-triangle leaves gains
   for (const auto& s : j["starts"]) EXPECT_EQ(s["stop_reason"], "converged");
   BvhFile file = read_bvh_file(a);
@@ -174,6 +183,36 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
   EXPECT_NEAR(sah_cost(read_bvh_file(one).bvh, file.info.cost), std::min(c1, c8), 1e-9 * c8);
   EXPECT_NE(run("bake 'builtin:atrium?triangles=4000' --start-leaf-sizes 0 -o " + one.string(), nullptr, &err), 0);
   EXPECT_NE(err.find("start-leaf-sizes"), std::string::npos) << err;
+  // --starts names the spatial limit too: the third start alone is that start's tree, as is
+  // --start-leaf-sizes with --spatial-max.
+  ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality best --starts 8:256 --threads 2 --json -o " +
+                    one.string(),
+                &out, &err),
+            0)
+      << err;
+  EXPECT_EQ(nlohmann::json::parse(out)["cost"].get<double>(), c256);
+  ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality best --start-leaf-sizes 8 --spatial-max 256 --threads 2 "
+                "--json -o " + one.string(),
+                &out, &err),
+            0)
+      << err;
+  EXPECT_EQ(nlohmann::json::parse(out)["cost"].get<double>(), c256);
+  for (const char* bad : {"0", "8:", "8:x", ":8", "70000", "8:-1", "8:1:2"}) {
+    EXPECT_NE(run("bake 'builtin:atrium?triangles=4000' --starts " + std::string(bad) + " -o " + one.string(), nullptr,
+                  &err),
+              0)
+        << bad;
+    EXPECT_NE(err.find("is not LEAF[:SPATIAL_MAX]"), std::string::npos) << bad << ": " << err;
+  }
+  EXPECT_NE(run("bake 'builtin:atrium?triangles=4000' --starts 8 --start-leaf-sizes 8 -o " + one.string(), nullptr, &err),
+            0);
+  // The spatial limit means nothing to the sweep builder: best runs its two distinct starts.
+  ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality best --builder sweep --threads 2 --json -o " +
+                    one.string(),
+                &out, &err),
+            0)
+      << err;
+  EXPECT_EQ(nlohmann::json::parse(out)["starts"].size(), 2u);
 
   // Another builder on request, and sweep for the other qualities.
   ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality fast --json -o " + a.string(), &out, &err), 0) << err;

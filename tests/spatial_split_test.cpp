@@ -10,6 +10,7 @@
 #include <array>
 #include <cmath>
 #include <filesystem>
+#include <iterator>
 #include <random>
 #include <vector>
 
@@ -381,6 +382,47 @@ TEST(SpatialSplit, SpatialSplitsOnlyFromTheGivenNodeSize) {
   EXPECT_GT(everywhere.stats.spatial_splits, 0u);
   EXPECT_EQ(nowhere.stats.spatial_splits, 0u);
   EXPECT_EQ(nowhere.refs.size(), mesh.triangle_count());
+}
+
+// The number of nodes over more than `above` distinct triangles whose two children share a
+// triangle. A node's distinct triangles are at most the references it held when it was
+// split (descendants' splits add references, not triangles), so with spatial splits only in
+// nodes of at most `above` references, such a node and all above it took object splits.
+size_t nodes_whose_children_share_a_triangle(const SpatialSplitResult& r, uint32_t above) {
+  std::vector<std::vector<uint32_t>> tris(r.bvh.nodes.size());
+  size_t shared = 0;
+  for (uint32_t n : r.bvh.post_order()) {
+    const BvhNode& node = r.bvh.nodes[n];
+    std::vector<uint32_t>& t = tris[n];
+    if (node.is_leaf()) {
+      for (uint32_t k = 0; k < node.ref_count(); ++k)
+        t.push_back(r.refs.triangle_ids[r.bvh.ref_indices[node.first_ref() + k]]);
+      std::sort(t.begin(), t.end());
+      t.erase(std::unique(t.begin(), t.end()), t.end());
+      continue;
+    }
+    const std::vector<uint32_t>& a = tris[node.child(0)];
+    const std::vector<uint32_t>& b = tris[node.child(1)];
+    std::vector<uint32_t> common;
+    std::set_intersection(a.begin(), a.end(), b.begin(), b.end(), std::back_inserter(common));
+    std::set_union(a.begin(), a.end(), b.begin(), b.end(), std::back_inserter(t));
+    if (t.size() > above && !common.empty()) ++shared;
+  }
+  return shared;
+}
+
+TEST(SpatialSplit, SpatialSplitsOnlyUpToTheGivenNodeSize) {
+  const Mesh mesh = crossing_mesh(3000, 17);
+  SpatialSplitConfig config;
+  config.spatial_from = 0;
+  const SpatialSplitResult everywhere = build_spatial_split(mesh, make_references(mesh), config);
+  EXPECT_GT(nodes_whose_children_share_a_triangle(everywhere, 64), 0u);  // the check can fail
+  config.spatial_max = 64;
+  const SpatialSplitResult small = build_spatial_split(mesh, make_references(mesh), config);
+  ASSERT_TRUE(validate(small.bvh, small.refs).ok());
+  expect_covered(mesh, small.refs);
+  EXPECT_GT(small.stats.spatial_splits, 0u);  // still below the limit
+  EXPECT_EQ(nodes_whose_children_share_a_triangle(small, 64), 0u);
 }
 
 // With fixed ranges (every node its own task), with subtrees of one task passing their room

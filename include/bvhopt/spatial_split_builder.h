@@ -29,6 +29,11 @@ struct SpatialSplitParams {
   // cost slightly (Conference 104.90 without them, 104.91 with, at 1.049 references per
   // triangle instead of 1.063) and took about a third of the build. 0 tries them everywhere.
   uint32_t spatial_from = 8;
+  // Nodes of more references than this take object splits only (0: no limit). Spatial splits
+  // near the root win the greedy SAH but fix the duplicated references in place: insertion
+  // optimization moves subtrees, never merges a triangle's pieces again. bake --quality best
+  // tries a start limited to 256 (see docs/spatial-splits.md for what it gains and where).
+  uint32_t spatial_max = 0;
   // Object splits are binned by box centre: a node of n references uses
   // clamp(n / 256, object_bins, 128) bins, at most 4 + n / 5 (as the binned builder).
   uint32_t object_bins = 32;  // 2 to 128

@@ -602,7 +602,8 @@ class SpatialSplitBuilder {
     if (t.count <= 1) return false;
     Split object = find_object_split(t);
     Split spatial;
-    const bool room = t.capacity > t.count && t.count >= config_.spatial_from;
+    const bool room = t.capacity > t.count && t.count >= config_.spatial_from &&
+                      (config_.spatial_max == 0 || t.count <= config_.spatial_max);
     if (room && (object.axis < 0 || overlap_area(object.left, object.right) > float(config_.alpha) * root_area_))
       spatial = find_spatial_split(t);
     const bool use_spatial = spatial.axis >= 0 && spatial.cost < object.cost;
