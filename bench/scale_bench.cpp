@@ -20,6 +20,7 @@
 // time measured in the same run, and the growth from the smallest to the largest built-in
 // scene is compared with n log n.
 #include <malloc.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <cmath>
@@ -175,11 +176,17 @@ Row run_scene(const std::string& spec, const Options& opt) {
   reset_heap_peak();
   InsertionConfig cfg;
   cfg.limits.time_limit = opt.budget * row.build_s;
+  // A progress line rewritten in place on a terminal; into a file (a logged run) one line
+  // every 10 passes, so the log reads without carriage returns.
+  const bool terminal = ::isatty(2) == 1;
   cfg.limits.on_pass = [&](const PassRecord& p) {
-    std::fprintf(stderr, "\r%s: pass %u, %.1f s, best %.4f   ", spec.c_str(), p.pass, p.seconds, p.best_cost);
+    if (terminal)
+      std::fprintf(stderr, "\r%s: pass %u, %.1f s, best %.4f   ", spec.c_str(), p.pass, p.seconds, p.best_cost);
+    else if (p.pass % 10 == 0)
+      std::fprintf(stderr, "%s: pass %u, %.1f s, best %.4f\n", spec.c_str(), p.pass, p.seconds, p.best_cost);
   };
   const OptimizeReport rep = optimize_insertion(bvh, cfg);
-  std::fprintf(stderr, "\n");
+  if (terminal) std::fprintf(stderr, "\n");
   row.optimize_bytes_per_tri = static_cast<double>(g_peak.load() - mesh_bytes) / tris;
   row.rss_bytes_per_tri = static_cast<double>(peak_rss()) / tris;
   row.cost_1x = cost_within(rep, row.build_s, true);
