@@ -136,9 +136,11 @@ struct SpatialBins {
 };
 
 // Bin boundaries as floats, so the binning and the partition compare against the very same
-// planes: boundary k (0..n) is min + k * width, and n is the box's max.
+// planes: boundary k (0..n) is min + k * width, and n is the box's max. They are tabled once
+// per node: computing them in the binning's search was most of its cost per reference.
 struct SpatialMapping {
   float min[3], width[3], max[3], inv[3];
+  float planes[3][kMaxBins + 1];
   uint32_t n;
   SpatialMapping(const Box& box, uint32_t bins) : n(bins) {
     for (int a = 0; a < 3; ++a) {
@@ -147,26 +149,30 @@ struct SpatialMapping {
       width[a] = (box.max[a] - box.min[a]) / float(bins);
       const float i = width[a] > 0.0f ? 1.0f / width[a] : 0.0f;
       inv[a] = std::isfinite(i) ? i : 0.0f;
+      for (uint32_t k = 0; k < n; ++k) planes[a][k] = min[a] + float(k) * width[a];
+      planes[a][n] = max[a];
     }
   }
   bool usable(int a) const { return inv[a] > 0.0f; }
-  float plane(int a, uint32_t k) const { return k >= n ? max[a] : min[a] + float(k) * width[a]; }
+  float plane(int a, uint32_t k) const { return planes[a][std::min(k, n)]; }
   uint32_t guess(int a, float x) const {
     const int k = static_cast<int>((x - min[a]) * inv[a]);
     return static_cast<uint32_t>(std::clamp(k, 0, static_cast<int>(n - 1)));
   }
   // The bin a box starting at x enters: the last k with plane(k) <= x.
   uint32_t enter_bin(int a, float x) const {
+    const float* p = planes[a];
     uint32_t k = guess(a, x);
-    while (k > 0 && x < plane(a, k)) --k;
-    while (k + 1 < n && x >= plane(a, k + 1)) ++k;
+    while (k > 0 && x < p[k]) --k;
+    while (k + 1 < n && x >= p[k + 1]) ++k;
     return k;
   }
   // The bin a box ending at x leaves: the first k with x <= plane(k + 1).
   uint32_t exit_bin(int a, float x) const {
+    const float* p = planes[a];
     uint32_t k = guess(a, x);
-    while (k > 0 && x <= plane(a, k)) --k;
-    while (k + 1 < n && x > plane(a, k + 1)) ++k;
+    while (k > 0 && x <= p[k]) --k;
+    while (k + 1 < n && x > p[k + 1]) ++k;
     return k;
   }
 };
@@ -524,10 +530,10 @@ class SpatialSplitBuilder {
     float sa[kMaxBins + 1], ulo[kMaxBins + 1], uhi[kMaxBins + 1], wlo[kMaxBins + 1], whi[kMaxBins + 1];
     sa[0] = c0a, ulo[0] = uhi[0] = c0u, wlo[0] = whi[0] = c0w;
     sa[cuts + 1] = c[2][a], ulo[cuts + 1] = uhi[cuts + 1] = c2u, wlo[cuts + 1] = whi[cuts + 1] = c2w;
-    const float origin = m.min[a], width = m.width[a];
+    const float* planes = m.planes[a] + enter + 1;
     uint32_t middle = 0;  // the piece of the middle corner: the planes below it
     for (uint32_t j = 0; j < cuts; ++j) {
-      const float x = origin + float(enter + 1 + j) * width;  // m.plane(a, enter + 1 + j)
+      const float x = planes[j];
       const float tl = std::min(std::max((x - c0a) * inv_long, 0.0f), 1.0f);
       const bool low = x <= c1a;
       const float s0a = low ? c0a : c1a, inv = low ? inv_low : inv_high;
