@@ -383,6 +383,32 @@ TEST(SpatialSplit, SpatialSplitsOnlyFromTheGivenNodeSize) {
   EXPECT_EQ(nowhere.refs.size(), mesh.triangle_count());
 }
 
+// node_alpha only ever removes spatial splits: at 0 the root's test alone decides, and a
+// node's object split can never overlap by more than the node's whole area, so at 1 a node
+// tries a spatial split only when no object split exists (none in this scene).
+TEST(SpatialSplit, NodeAlphaTriesSpatialSplitsOnlyWhereChildrenOverlapEnough) {
+  const Mesh mesh = crossing_mesh(3000, 17);
+  const PrimitiveRefs refs = make_references(mesh);
+  SpatialSplitConfig config;
+  config.spatial_from = 0;
+  config.node_alpha = 0.0;
+  const SpatialSplitResult all = build_spatial_split(mesh, refs, config);
+  config.node_alpha = 0.1;
+  const SpatialSplitResult some = build_spatial_split(mesh, refs, config);
+  config.node_alpha = 1.0;
+  const SpatialSplitResult none = build_spatial_split(mesh, refs, config);
+  EXPECT_GT(all.stats.spatial_splits, 0u);
+  EXPECT_GT(some.stats.spatial_splits, 0u);
+  EXPECT_LE(some.stats.spatial_splits, all.stats.spatial_splits);
+  EXPECT_EQ(none.stats.spatial_splits, 0u);
+  EXPECT_EQ(none.refs.size(), mesh.triangle_count());
+  for (const SpatialSplitResult* r : {&all, &some, &none}) EXPECT_TRUE(validate(r->bvh, r->refs).ok());
+  config.node_alpha = -0.5;
+  EXPECT_THROW(build_spatial_split(mesh, refs, config), Error);
+  config.node_alpha = std::nan("");
+  EXPECT_THROW(build_spatial_split(mesh, refs, config), Error);
+}
+
 // With fixed ranges (every node its own task), with subtrees of one task passing their room
 // on, and with the whole tree built by one task.
 TEST(SpatialSplit, BudgetIsNeverExceeded) {

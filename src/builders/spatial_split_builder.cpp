@@ -617,13 +617,19 @@ class SpatialSplitBuilder {
     return best;
   }
 
+  // Whether an object split's overlap is large enough to try a spatial split: against the
+  // root's area (the paper's alpha) and the node's own (node_alpha).
+  bool worth_spatial(float overlap, double node_area) const {
+    return overlap > float(config_.alpha) * root_area_ && double(overlap) > config_.node_alpha * node_area;
+  }
+
   // Chooses the node's split (false: make it a leaf) and partitions its references.
   bool split(const Task& t, double node_area, Task& l, Task& r) {
     if (t.count <= 1) return false;
     Split object = find_object_split(t);
     Split spatial;
     const bool room = t.capacity > t.count && t.count >= config_.spatial_from;
-    if (room && (object.axis < 0 || overlap_area(object.left, object.right) > float(config_.alpha) * root_area_))
+    if (room && (object.axis < 0 || worth_spatial(overlap_area(object.left, object.right), node_area)))
       spatial = find_spatial_split(t);
     const bool use_spatial = spatial.axis >= 0 && spatial.cost < object.cost;
     if (use_spatial || object.axis >= 0) {
