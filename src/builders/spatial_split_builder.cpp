@@ -208,10 +208,23 @@ struct PartitionScratch {
   std::vector<size_t> left_at, right_at;
   void reserve(size_t count, size_t blocks) {
     if (whole.size() < count) whole.resize(count), left.resize(count), right.resize(count), side.resize(count);
-    if (per_block.size() < blocks) left_at.resize(blocks), right_at.resize(blocks);
+    reserve_blocks(blocks);
+  }
+  void reserve_blocks(size_t blocks) {
+    if (left_at.size() < blocks) left_at.resize(blocks), right_at.resize(blocks);
     per_block.assign(blocks, Sides{});
   }
 };
+
+// Raw storage for types whose members have initializers, to be written in parallel (or
+// only where used) rather than constructed by one thread.
+struct FreeStorage {
+  void operator()(void* p) const { ::operator delete(p); }
+};
+template <class T>
+std::unique_ptr<T[], FreeStorage> uninitialized_array(size_t n) {
+  return std::unique_ptr<T[], FreeStorage>(static_cast<T*>(::operator new(n * sizeof(T))));
+}
 
 class SpatialSplitBuilder {
  public:
@@ -243,12 +256,19 @@ class SpatialSplitBuilder {
     // Room for every node a subtree might make, never built unless marked: filled in
     // parallel (as a vector, one thread wrote all 40 bytes of each of them).
     work_size_ = 2 * capacity_ - 1;
-    work_.reset(static_cast<BvhNode*>(::operator new(work_size_ * sizeof(BvhNode))));
+    work_ = uninitialized_array<BvhNode>(work_size_);
+    if (parallel(n)) {  // no node holds more references than the root
+      parallel_scratch_.whole = uninitialized_array<SRef>(capacity_);
+      parallel_scratch_.left = uninitialized_array<SRef>(capacity_);
+      parallel_scratch_.right = uninitialized_array<SRef>(capacity_);
+      parallel_scratch_.side = uninitialized_array<uint8_t>(capacity_);
+    }
     tbb::parallel_for(tbb::blocked_range<size_t>(0, work_size_, kBlock), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i < r.end(); ++i) new (&work_[i]) BvhNode{};
     });
     build(Task{0, 0, n, capacity_, 0, kInvalidNode, root});
     tasks_.wait();
+    parallel_scratch_ = {};
     compact();
     SpatialSplitStats& s = out_.stats;
     s.input_references = n;
@@ -737,14 +757,26 @@ class SpatialSplitBuilder {
     const size_t blocks = (t.count + kBlock - 1) / kBlock;
     // A serial partition takes its scratch from its thread (nothing else runs on the thread
     // meanwhile); a parallel one waits in parallel_for, where this thread may run another.
+    // A parallel one takes the part of the build's scratch arrays that matches its slots,
+    // which no other node uses meanwhile (allocated per partition and constructed by one
+    // thread, they were a twentieth of classroom's build).
     PartitionScratch own;
     thread_local PartitionScratch reused;
-    PartitionScratch& scratch = parallel(t.count) ? own : reused;
-    scratch.reserve(t.count, blocks);
-    SRef* left = scratch.left.data();
-    SRef* right = scratch.right.data();
-    SRef* whole = scratch.whole.data();
-    uint8_t* side = scratch.side.data();
+    const bool in_parallel = parallel(t.count);
+    PartitionScratch& scratch = in_parallel ? own : reused;
+    SRef *left, *right, *whole;
+    uint8_t* side;
+    if (in_parallel) {
+      scratch.reserve_blocks(blocks);
+      left = parallel_scratch_.left.get() + t.room;
+      right = parallel_scratch_.right.get() + t.room;
+      whole = parallel_scratch_.whole.get() + t.room;
+      side = parallel_scratch_.side.get() + t.room;
+    } else {
+      scratch.reserve(t.count, blocks);
+      left = scratch.left.data(), right = scratch.right.data(), whole = scratch.whole.data();
+      side = scratch.side.data();
+    }
     Sides* per_block = scratch.per_block.data();
     auto classify_block = [&](size_t b) {
       Sides& sides = per_block[b];
@@ -966,12 +998,15 @@ class SpatialSplitBuilder {
   float root_area_ = 0.0f;
   std::unique_ptr<SRef[]> slots_;
   // The nodes while building, numbered as the tasks reserve them (compact() renumbers them
-  // into the result). Raw storage: BvhNode's members have initializers.
-  struct FreeStorage {
-    void operator()(BvhNode* p) const { ::operator delete(p); }
-  };
+  // into the result).
   std::unique_ptr<BvhNode[], FreeStorage> work_;
   size_t work_size_ = 0;
+  // The parallel partitions' scratch, one place per slot: a node uses the places of its own
+  // slots, so nodes partitioned at the same time never share any.
+  struct {
+    std::unique_ptr<SRef[], FreeStorage> whole, left, right;
+    std::unique_ptr<uint8_t[], FreeStorage> side;
+  } parallel_scratch_;
   tbb::task_group tasks_;
   std::atomic<size_t> spatial_splits_{0}, object_splits_{0}, cut_{0}, unsplit_{0};
 };
