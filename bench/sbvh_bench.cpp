@@ -92,6 +92,7 @@ struct Options {
   int threads = 2;
   double budget = 1.3;
   double alpha = SpatialSplitParams{}.alpha;
+  double node_alpha = SpatialSplitParams{}.node_alpha;
   uint32_t spatial_bins = SpatialSplitParams{}.spatial_bins;
   double embree_budget = 1.5;
   double opt_seconds = -1.0;  // < 0: the mode's default
@@ -115,6 +116,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--threads") o.threads = std::max(1, std::stoi(args.value()));
     else if (a == "--budget") o.budget = std::stod(args.value());
     else if (a == "--alpha") o.alpha = std::stod(args.value());
+    else if (a == "--node-alpha") o.node_alpha = std::stod(args.value());
     else if (a == "--spatial-bins") o.spatial_bins = uint32_t(std::stoul(args.value()));
     else if (a == "--embree-budget") o.embree_budget = std::stod(args.value());
     else if (a == "--opt-seconds") o.opt_seconds = std::stod(args.value());
@@ -131,7 +133,7 @@ Options parse(int argc, char** argv) {
     } else if (a == "--json") o.json_path = args.value();
     else if (a == "--help" || a == "-h") {
       std::cout << "sbvh_bench [--scenes DIR] [--scene FILE]... [--runs 5] [--threads 2] [--budget 1.3] [--alpha 1e-5]\n"
-                   "           [--spatial-bins 32]\n"
+                   "           [--node-alpha 0.1] [--spatial-bins 32]\n"
                    "           [--embree-budget 1.5] [--opt-seconds S] [--no-embree] [--json FILE]\n"
                    "sbvh_bench --compare [--rotate 0,30] [--rays N] [--ray-passes 11] [--ray-threads 1]\n"
                    "           [--opt-seconds 20] ...\n";
@@ -278,6 +280,7 @@ nlohmann::json run_scene(const Options& opt, const std::string& spec) {
   config.cost = cost;
   config.budget = opt.budget;
   config.alpha = opt.alpha;
+  config.node_alpha = opt.node_alpha;
   config.spatial_bins = opt.spatial_bins;
 
   ThreadLimit limit(opt.threads);
@@ -404,6 +407,7 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     bo.cost = cost;
     bo.sbvh.budget = opt.budget;
     bo.sbvh.alpha = opt.alpha;
+    bo.sbvh.node_alpha = opt.node_alpha;
     bo.sbvh.spatial_bins = opt.spatial_bins;
     bo.sbvh.spatial_max = v.spatial_max;
     bo.leaf.max_leaf_size = v.leaf_size;

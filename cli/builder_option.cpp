@@ -17,6 +17,11 @@ void add_budget_option(CLI::App* app, SpatialSplitParams& params) {
       ->check(finite_number())
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
+  app->add_option("--split-node-alpha", params.node_alpha,
+                  "sbvh: ... and by more than this fraction of the node's own area (0: the root's test alone)")
+      ->check(finite_number())
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   app->add_option("--spatial-bins", params.spatial_bins,
                   "sbvh: most bins per axis for spatial splits (a node of n references uses at most 4 + n/2)")
       ->check(whole_number(kMinBinCount, kMaxBinCount))

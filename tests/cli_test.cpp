@@ -68,8 +68,9 @@ TEST_F(Cli, ExplicitBinCountIsHonoured) {
 }
 
 // The sbvh builder's settings reach it: spatial splits everywhere (--spatial-from 0), none
-// (--split-alpha 1: no overlap is that large) and a few bins each give another tree than the
-// defaults; values outside their ranges are refused by name.
+// (--split-alpha 1: no overlap is that large), the root's test alone (--split-node-alpha 0)
+// and a few bins each give another tree than the defaults; values outside their ranges are
+// refused by name.
 TEST_F(Cli, SbvhSettingsAreHonoured) {
   auto build_with = [&](const std::string& options) {
     CliRun r = run("build 'builtin?triangles=4000' --builder sbvh " + options + " --json -o " + (dir_ / "s.bvh").string());
@@ -77,14 +78,16 @@ TEST_F(Cli, SbvhSettingsAreHonoured) {
     return r.exit_code == 0 ? nlohmann::json::parse(r.out) : nlohmann::json{{"cost", -1.0}, {"references", 0}};
   };
   const nlohmann::json defaults = build_with(""), everywhere = build_with("--spatial-from 0"),
-                       none = build_with("--split-alpha 1"), few_bins = build_with("--spatial-bins 2");
+                       none = build_with("--split-alpha 1"), few_bins = build_with("--spatial-bins 2"),
+                       root_test_only = build_with("--split-node-alpha 0");
   const size_t triangles = defaults["triangles"].get<size_t>();
   EXPECT_GT(defaults["references"].get<size_t>(), triangles);  // the default does split
   EXPECT_EQ(none["references"].get<size_t>(), triangles);      // alpha 1 never does
   EXPECT_NE(everywhere["cost"].get<double>(), defaults["cost"].get<double>());
   EXPECT_NE(few_bins["cost"].get<double>(), defaults["cost"].get<double>());
+  EXPECT_NE(root_test_only["cost"].get<double>(), defaults["cost"].get<double>());
   for (const std::string bad : {"--spatial-bins 1", "--spatial-bins 129", "--split-alpha nan", "--split-alpha -1",
-                                "--spatial-from -1"}) {
+                                "--split-node-alpha -1", "--split-node-alpha nan", "--spatial-from -1"}) {
     CliRun r = run("build builtin --builder sbvh " + bad + " -o " + (dir_ / "x.bvh").string());
     EXPECT_EQ(r.exit_code, 2) << bad;
     EXPECT_NE(r.err.find(bad.substr(0, bad.find(' '))), std::string::npos) << r.err;

@@ -425,6 +425,73 @@ TEST(SpatialSplit, SpatialSplitsOnlyUpToTheGivenNodeSize) {
   EXPECT_EQ(nodes_whose_children_share_a_triangle(small, 64), 0u);
 }
 
+// Nodes of two references take their own path (no bins cleared or swept). On pairs of every
+// kind (apart, overlapping, identical, flat, sharing a centre, far from the origin): a valid
+// tree of both triangles, and when split, two leaves of one with the left one's centre below
+// the right one's on some axis (the binned split sends the lower centre left) or, for one
+// centre, the same.
+TEST(SpatialSplit, PairsOfReferencesSplitWithTheLowerCentreLeft) {
+  std::mt19937_64 rng(29);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  int split = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    Mesh mesh;
+    const float scale = trial % 4 == 3 ? 1e6f : 1.0f;
+    const Vec3 offset = trial % 5 == 4 ? Vec3(1e5f, -3e4f, 7e3f) : Vec3(0.0f);
+    Vec3 p[6];
+    for (Vec3& v : p) v = offset + Vec3(u(rng), u(rng), u(rng)) * scale;
+    if (trial % 7 == 1) p[3] = p[0], p[4] = p[1], p[5] = p[2];               // the same triangle twice
+    if (trial % 7 == 2) p[3] = p[0] * 2.0f - p[1], p[4] = p[0] * 2.0f - p[2], p[5] = p[0];  // a shared corner
+    if (trial % 7 == 3)
+      for (Vec3& v : p) v.z = offset.z;  // flat on z
+    if (trial % 7 == 4) p[3] = p[1], p[4] = p[0], p[5] = p[2];  // the same corners in another order
+    for (const Vec3& v : p) mesh.add_vertex(v);
+    mesh.add_triangle(0, 1, 2);
+    mesh.add_triangle(3, 4, 5);
+    const SpatialSplitResult r = build_spatial_split(mesh, make_references(mesh));
+    ASSERT_TRUE(validate(r.bvh, r.refs).ok()) << "trial " << trial;
+    ASSERT_EQ(r.refs.size(), 2u) << "trial " << trial;
+    const BvhNode& root = r.bvh.nodes[r.bvh.root];
+    if (root.is_leaf()) continue;
+    ++split;
+    const BvhNode& left = r.bvh.nodes[root.left()];
+    const BvhNode& right = r.bvh.nodes[root.right()];
+    ASSERT_TRUE(left.is_leaf() && right.is_leaf()) << "trial " << trial;
+    ASSERT_EQ(left.ref_count() + right.ref_count(), 2u) << "trial " << trial;
+    const Vec3 cl = r.refs.boxes[r.bvh.ref_indices[left.first_ref()]].center();
+    const Vec3 cr = r.refs.boxes[r.bvh.ref_indices[right.first_ref()]].center();
+    const bool same_centre = cl.x == cr.x && cl.y == cr.y && cl.z == cr.z;  // halved in slot order
+    EXPECT_TRUE(same_centre || cl.x < cr.x || cl.y < cr.y || cl.z < cr.z) << "trial " << trial;
+  }
+  EXPECT_GT(split, 200);
+}
+
+// node_alpha only ever removes spatial splits: at 0 the root's test alone decides, and a
+// node's object split can never overlap by more than the node's whole area, so at 1 a node
+// tries a spatial split only when no object split exists (none in this scene).
+TEST(SpatialSplit, NodeAlphaTriesSpatialSplitsOnlyWhereChildrenOverlapEnough) {
+  const Mesh mesh = crossing_mesh(3000, 17);
+  const PrimitiveRefs refs = make_references(mesh);
+  SpatialSplitConfig config;
+  config.spatial_from = 0;
+  config.node_alpha = 0.0;
+  const SpatialSplitResult all = build_spatial_split(mesh, refs, config);
+  config.node_alpha = 0.1;
+  const SpatialSplitResult some = build_spatial_split(mesh, refs, config);
+  config.node_alpha = 1.0;
+  const SpatialSplitResult none = build_spatial_split(mesh, refs, config);
+  EXPECT_GT(all.stats.spatial_splits, 0u);
+  EXPECT_GT(some.stats.spatial_splits, 0u);
+  EXPECT_LE(some.stats.spatial_splits, all.stats.spatial_splits);
+  EXPECT_EQ(none.stats.spatial_splits, 0u);
+  EXPECT_EQ(none.refs.size(), mesh.triangle_count());
+  for (const SpatialSplitResult* r : {&all, &some, &none}) EXPECT_TRUE(validate(r->bvh, r->refs).ok());
+  config.node_alpha = -0.5;
+  EXPECT_THROW(build_spatial_split(mesh, refs, config), Error);
+  config.node_alpha = std::nan("");
+  EXPECT_THROW(build_spatial_split(mesh, refs, config), Error);
+}
+
 // With fixed ranges (every node its own task), with subtrees of one task passing their room
 // on, and with the whole tree built by one task.
 TEST(SpatialSplit, BudgetIsNeverExceeded) {

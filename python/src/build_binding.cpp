@@ -35,7 +35,8 @@ std::optional<EdgeVolumeConfig> evh_config(const py::object& evh) {
 
 Tree build(const Scene& scene, const std::string& builder, uint32_t leaf_size, double c_t, double c_i,
            std::optional<int> threads, const py::object& evh, std::optional<uint32_t> bins, double budget,
-           double split_alpha, uint32_t spatial_bins, uint32_t spatial_from, uint32_t spatial_max) {
+           double split_alpha, uint32_t spatial_bins, uint32_t spatial_from, double split_node_alpha,
+           uint32_t spatial_max) {
   BuildOptions options;
   const auto kind = parse_builder(builder);
   if (!kind) throw Error("build: unknown builder '" + builder + "' (known: " + known_builders() + ")");
@@ -50,6 +51,7 @@ Tree build(const Scene& scene, const std::string& builder, uint32_t leaf_size, d
   options.sbvh.alpha = split_alpha;
   options.sbvh.spatial_bins = spatial_bins;
   options.sbvh.spatial_from = spatial_from;
+  options.sbvh.node_alpha = split_node_alpha;
   options.sbvh.spatial_max = spatial_max;
   validate(options);
   const std::optional<EdgeVolumeConfig> subdivide = evh_config(evh);
@@ -84,10 +86,12 @@ void register_build(py::module_& m) {
         py::arg("bins") = py::none(), py::arg("budget") = SpatialSplitParams{}.budget,
         py::arg("split_alpha") = SpatialSplitParams{}.alpha, py::arg("spatial_bins") = SpatialSplitParams{}.spatial_bins,
         py::arg("spatial_from") = SpatialSplitParams{}.spatial_from,
+        py::arg("split_node_alpha") = SpatialSplitParams{}.node_alpha,
         py::arg("spatial_max") = SpatialSplitParams{}.spatial_max,
         "Builds a BVH top-down: builder 'sweep' | 'binned' | 'spatial-median' | 'object-median' | 'sbvh' "
-        "(spatial splits, at most budget x triangles references; split_alpha, spatial_bins, spatial_from and "
-        "spatial_max as the command line's --split-alpha, --spatial-bins, --spatial-from and --spatial-max); evh=True (or the exponent t) "
+        "(spatial splits, at most budget x triangles references; split_alpha, split_node_alpha, spatial_bins, "
+        "spatial_from and spatial_max as the command line's --split-alpha, --split-node-alpha, --spatial-bins, "
+        "--spatial-from and --spatial-max); evh=True (or the exponent t) "
         "subdivides fat triangles first. The tree does not depend on threads.");
   m.def("load", &load, py::arg("path"), "Reads a BVH file written by Bvh.save or the command line");
   m.def("builders", [] {

@@ -52,7 +52,7 @@ def test_build_cost_equals_the_command_line(cli, tmp_path, scene, builder):
 
 
 @pytest.mark.parametrize("option,value", [("budget", 1.1), ("split_alpha", 1.0), ("spatial_bins", 2),
-                                          ("spatial_from", 0)])
+                                          ("spatial_from", 0), ("split_node_alpha", 0.0)])
 def test_sbvh_settings_equal_the_command_line(cli, tmp_path, scene, option, value):
     flag = "--" + option.replace("_", "-")
     ref = run_cli(cli, "build", SCENE, "--builder", "sbvh", flag, str(value), "-o", str(tmp_path / "a.bvh"))

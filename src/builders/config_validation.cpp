@@ -47,6 +47,7 @@ void validate(const SpatialSplitConfig& config) {
   if (!std::isfinite(config.budget) || config.budget < 1.0)
     throw Error("budget is " + std::to_string(config.budget) + ", must be finite and >= 1 (references per triangle)");
   check_cost("alpha", config.alpha);
+  check_cost("node_alpha", config.node_alpha);
   check_range("spatial_bins", config.spatial_bins, kMinBinCount, kMaxBinCount);
   check_range("object_bins", config.object_bins, kMinBinCount, kMaxBinCount);
   check_range("exact_sweep_below", config.exact_sweep_below, 0, 65536);
