@@ -339,8 +339,20 @@ class OptimalCollapse {
       leaf_[i] = 1;
       return;
     }
-    // distribute(j): the best split of j slots over the two children, k to the left.
+    // distribute(j): the best split of j slots over the two children, k to the left (the
+    // first of equal sums). A row never grows with more slots, and a float sum never
+    // shrinks as one term grows, so when the left child is a leaf (its row one value) the
+    // first split, k = 1, is the best: the loop is skipped for a large share of the nodes
+    // (not when that sum is NaN, which the loop never takes).
+    const bool left_is_leaf = bvh_.nodes[i + 1].is_leaf();
     auto distribute = [&](uint32_t j, uint8_t& best_k) {
+      if (left_is_leaf) {
+        const float first = cl[0] + cr[j - 2];
+        if (first == first) {
+          best_k = 1;
+          return first;
+        }
+      }
       float best = kInf;
       best_k = 1;
       for (uint32_t k = 1; k < j; ++k) {
