@@ -65,9 +65,9 @@ bool entries_are_distinct(const FlatBvh& bvh) {
   return true;
 }
 
-std::vector<uint8_t> distinct_counts(const FlatBvh& bvh, uint32_t limit) {
+std::vector<uint8_t> distinct_counts(const FlatBvh& bvh, uint32_t limit, bool entries_distinct) {
   std::vector<uint8_t> count(bvh.nodes.size(), kSaturated);
-  if (entries_are_distinct(bvh)) {
+  if (entries_distinct) {
     // The same counts by sums, without the sorted sets (most of the collapse's time on
     // trees of unsplit triangles). `size` is kept while it is known, as the sets' sizes are.
     std::vector<uint32_t> size(bvh.nodes.size(), 0);
@@ -126,11 +126,19 @@ std::vector<uint8_t> distinct_counts(const FlatBvh& bvh, uint32_t limit) {
   return count;
 }
 
+// The wide SAH cost from its sums of node areas and of leaf areas times blocks.
+double normalized_wide_cost(double nodes, double blocks, const FlatBvh& bvh, const WideCostModel& cost) {
+  const double root = double(bvh.nodes[0].box.area());
+  const double total = cost.node * nodes + cost.block * blocks;
+  return root > 0.0 ? total / root : total;
+}
+
 // Builds the output structure from a function giving each wide node's children.
 class CollapseWriter {
  public:
   // Reserved to their bounds (pages never written are never touched): no regrowth copies.
-  CollapseWriter(const FlatBvh& bvh, uint32_t width) : bvh_(bvh) {
+  CollapseWriter(const FlatBvh& bvh, uint32_t width, bool entries_distinct)
+      : bvh_(bvh), entries_distinct_(entries_distinct) {
     out_.width = width;
     const size_t leaves = (bvh.nodes.size() + 1) / 2;
     out_.nodes.reserve(leaves);
@@ -145,7 +153,7 @@ class CollapseWriter {
   // `children_of(flat, out)` appends the flat nodes that become the wide node's children;
   // `is_leaf(flat)` says which of them are leaves. Depth-first, children in the order given.
   template <class ChildrenOf, class IsLeaf>
-  CollapsedBvh write(ChildrenOf&& children_of, IsLeaf&& is_leaf) {
+  CollapsedBvh write(ChildrenOf&& children_of, IsLeaf&& is_leaf, const WideCostModel& cost) {
     struct Pending {
       uint32_t flat;
       uint32_t slot;  // index in out_.child_index to patch with the wide node, kNoSet for the root
@@ -158,6 +166,7 @@ class CollapseWriter {
       const uint32_t w = uint32_t(out_.nodes.size());
       if (p.slot != kNoSet) out_.child_index[p.slot] = w;
       out_.nodes.push_back(p.flat);
+      node_area_ += double(bvh_.nodes[p.flat].box.area());
       kids.clear();
       if (bvh_.nodes[p.flat].is_leaf())
         kids.push_back(p.flat);  // a tree that is one leaf
@@ -175,24 +184,60 @@ class CollapseWriter {
       for (size_t s = out_.children.size(); s-- > first_slot;)
         if (!out_.child_is_leaf[s]) todo.push_back({out_.children[s], uint32_t(s)});
     }
+    out_.sah_cost = normalized_wide_cost(node_area_, block_area_, bvh_, cost);
     return std::move(out_);
   }
 
  private:
+  // Also adds the leaf's term of the wide SAH cost, in the order wide_sah_cost adds it (so
+  // the same double, without a second walk over the children's boxes).
   uint32_t add_leaf(uint32_t flat) {
-    distinct_triangles(bvh_, flat, set_, scratch_);
-    const size_t n = set_.size();
+    const size_t first = out_.leaf_triangles.size();
+    if (entries_distinct_) {
+      append_entries(flat);
+      std::sort(out_.leaf_triangles.begin() + first, out_.leaf_triangles.end());
+    } else {
+      distinct_triangles(bvh_, flat, set_, scratch_);
+      out_.leaf_triangles.insert(out_.leaf_triangles.end(), set_.begin(), set_.end());
+    }
+    const size_t n = out_.leaf_triangles.size() - first;
     if (n > kMaxLeafTriangles)
       throw Error("collapse: a leaf of " + std::to_string(n) + " distinct triangles; wide leaves hold at most " +
                   std::to_string(kMaxLeafTriangles) + " (build with a smaller leaf size)");
-    out_.leaf_triangles.insert(out_.leaf_triangles.end(), set_.begin(), set_.end());
+    block_area_ += double(bvh_.nodes[flat].box.area()) * double(blocks_for(uint32_t(n)));
     out_.leaf_begin.push_back(uint32_t(out_.leaf_triangles.size()));
     return uint32_t(out_.leaf_begin.size() - 2);
   }
 
+  // Every leaf entry under flat node n, when no triangle repeats (then they are its distinct
+  // triangles, and only need sorting).
+  void append_entries(uint32_t n) {
+    if (bvh_.nodes[n].is_leaf()) {  // most wide leaves are one binary leaf
+      const FlatNode& f = bvh_.nodes[n];
+      out_.leaf_triangles.insert(out_.leaf_triangles.end(), bvh_.triangle_ids.begin() + f.index,
+                                 bvh_.triangle_ids.begin() + f.index + f.count);
+      return;
+    }
+    scratch_.assign(1, n);
+    while (!scratch_.empty()) {
+      const uint32_t i = scratch_.back();
+      scratch_.pop_back();
+      const FlatNode& f = bvh_.nodes[i];
+      if (f.is_leaf()) {
+        out_.leaf_triangles.insert(out_.leaf_triangles.end(), bvh_.triangle_ids.begin() + f.index,
+                                   bvh_.triangle_ids.begin() + f.index + f.count);
+      } else {
+        scratch_.push_back(right_of(bvh_, i));
+        scratch_.push_back(left_of(i));
+      }
+    }
+  }
+
   const FlatBvh& bvh_;
+  const bool entries_distinct_;
   std::vector<uint32_t> set_, scratch_;
   CollapsedBvh out_;
+  double node_area_ = 0.0, block_area_ = 0.0;  // the wide SAH cost's two sums
 };
 
 // The dynamic program. C(n, i), the least cost of the subtree of n as at most i subtrees
@@ -204,19 +249,20 @@ class CollapseWriter {
 // Floats: the argmins are what matters, and the final cost is re-evaluated in double.
 class OptimalCollapse {
  public:
-  OptimalCollapse(const FlatBvh& bvh, const CollapseOptions& o)
+  OptimalCollapse(const FlatBvh& bvh, const CollapseOptions& o, bool entries_distinct)
       : bvh_(bvh), options_(o), width_(o.width),
         choice_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size() * o.width)),
         internal_split_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size())),
         leaf_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size())),
-        distinct_(distinct_counts(bvh, o.max_leaf_triangles)) {
+        distinct_(distinct_counts(bvh, o.max_leaf_triangles, entries_distinct)) {
     const uint32_t n = uint32_t(bvh.nodes.size());
     // Areas relative to the root's: the float rows then hold the same numbers at every
     // scale of the scene (absolute areas overflow a float above extents of about 1e19).
     const double root_area = n ? bvh.nodes[0].box.area() : 0.0;
     per_area_ = root_area > 0.0 ? 1.0 / root_area : 1.0;
     float row[kMaxWidth];
-    if (n) solve(0, n, row);
+    if (n && width_ == 8) solve<8>(0, n, row);
+    if (n && width_ == 4) solve<4>(0, n, row);
   }
 
   // The wide children of flat inner node n: the subtrees of its two children's best
@@ -249,49 +295,64 @@ class OptimalCollapse {
 
   // The subtree of flat node `top`, nodes [top, end) (depth-first numbering), its cost row
   // written to `row`. Below kParallelNodes, one scan in reverse depth-first order with the
-  // rows on a stack: a node's two children are then the top two rows.
+  // rows on a stack: a node's two children are then the top two rows. W is the width as a
+  // constant, so that the rows' loops unroll and the rows are moved without calls.
+  template <uint32_t W>
   void solve(uint32_t top, uint32_t end, float* row) {
     const FlatNode& f = bvh_.nodes[top];
     if (end - top >= kParallelNodes && !f.is_leaf()) {
-      float cl[kMaxWidth], cr[kMaxWidth];
+      float cl[W], cr[W];
       const uint32_t right = f.index;
-      tbb::parallel_invoke([&] { solve(top + 1, right, cl); }, [&] { solve(right, end, cr); });
-      solve_node(top, cl, cr, row);
+      tbb::parallel_invoke([&] { solve<W>(top + 1, right, cl); }, [&] { solve<W>(right, end, cr); });
+      solve_node<W>(top, cl, cr, row);
       return;
     }
-    const uint32_t w = width_;
-    std::vector<float> rows;  // the stack, w floats per entry
-    rows.reserve(size_t(w) * 64);
-    float cl[kMaxWidth], cr[kMaxWidth], c[kMaxWidth];
+    std::vector<float> rows(64 * W);  // the stack, W floats per entry
+    size_t depth = 0;                         // entries on the stack
     for (uint32_t i = end; i-- > top;) {
-      if (!bvh_.nodes[i].is_leaf()) {
-        std::copy(rows.end() - w, rows.end(), cl);
-        std::copy(rows.end() - 2 * w, rows.end() - w, cr);
-        rows.resize(rows.size() - 2 * w);
+      float c[W];
+      if (bvh_.nodes[i].is_leaf()) {
+        solve_node<W>(i, nullptr, nullptr, c);
+        if ((depth + 1) * W > rows.size()) rows.resize(2 * rows.size());
+      } else {
+        depth -= 2;
+        solve_node<W>(i, &rows[(depth + 1) * W], &rows[depth * W], c);
       }
-      solve_node(i, cl, cr, c);
-      rows.insert(rows.end(), c, c + w);
+      for (uint32_t j = 0; j < W; ++j) rows[depth * W + j] = c[j];
+      ++depth;
     }
-    std::copy(rows.begin(), rows.begin() + w, row);
+    for (uint32_t j = 0; j < W; ++j) row[j] = rows[j];
   }
 
   // Node i's row `c` and choices from its children's rows (unread for a leaf).
+  template <uint32_t W>
   void solve_node(uint32_t i, const float* cl, const float* cr, float* c) {
-    const uint32_t w = width_;
     const FlatNode& f = bvh_.nodes[i];
     const float area = float(f.box.area() * per_area_);
-    uint8_t* ch = &choice_[size_t(i) * w];
+    uint8_t* ch = &choice_[size_t(i) * W];
     float leaf_cost = kInf;
     if (distinct_[i] != kSaturated && (f.is_leaf() || distinct_[i] <= options_.max_leaf_triangles))
       leaf_cost = float(options_.cost.block) * area * float(blocks_for(distinct_[i]));
     if (f.is_leaf()) {
-      std::fill(c, c + w, leaf_cost);
-      std::fill(ch, ch + w, uint8_t(0));
+      for (uint32_t j = 0; j < W; ++j) c[j] = leaf_cost;
+      for (uint32_t j = 0; j < W; ++j) ch[j] = 0;
       leaf_[i] = 1;
       return;
     }
-    // distribute(j): the best split of j slots over the two children, k to the left.
+    // distribute(j): the best split of j slots over the two children, k to the left (the
+    // first of equal sums). A row never grows with more slots, and a float sum never
+    // shrinks as one term grows, so when the left child is a leaf (its row one value) the
+    // first split, k = 1, is the best: the loop is skipped for a large share of the nodes
+    // (not when that sum is NaN, which the loop never takes).
+    const bool left_is_leaf = bvh_.nodes[i + 1].is_leaf();
     auto distribute = [&](uint32_t j, uint8_t& best_k) {
+      if (left_is_leaf) {
+        const float first = cl[0] + cr[j - 2];
+        if (first == first) {
+          best_k = 1;
+          return first;
+        }
+      }
       float best = kInf;
       best_k = 1;
       for (uint32_t k = 1; k < j; ++k) {
@@ -303,11 +364,11 @@ class OptimalCollapse {
       }
       return best;
     };
-    const float internal = float(options_.cost.node) * area + distribute(w, internal_split_[i]);
+    const float internal = float(options_.cost.node) * area + distribute(W, internal_split_[i]);
     leaf_[i] = leaf_cost <= internal ? 1 : 0;
     c[0] = std::min(leaf_cost, internal);
     ch[0] = 0;
-    for (uint32_t j = 2; j <= w; ++j) {
+    for (uint32_t j = 2; j <= W; ++j) {
       uint8_t k = 0;
       const float d = distribute(j, k);
       // choice 0: as at most j-1 subtrees; k: k slots to the left, j-k to the right.
@@ -360,20 +421,16 @@ CollapsedBvh collapse_to_wide(const FlatBvh& bvh, const CollapseOptions& options
     throw Error("collapse: width " + std::to_string(options.width) + " (4 or 8)");
   if (bvh.nodes.empty()) throw Error("collapse: the tree has no nodes");
   const uint32_t limit = std::min(options.max_leaf_triangles, kMaxLeafTriangles);
-  CollapseWriter writer(bvh, options.width);
-  CollapsedBvh out;
-  if (options.method == CollapseMethod::greedy) {
-    out = writer.write([&](uint32_t n, std::vector<uint32_t>& kids) { greedy_children(bvh, n, options.width, kids); },
-                       [](uint32_t) { return false; });
-  } else {
-    CollapseOptions o = options;
-    o.max_leaf_triangles = limit;
-    const OptimalCollapse dp(bvh, o);
-    out = writer.write([&](uint32_t n, std::vector<uint32_t>& kids) { dp.children_of(n, kids); },
-                       [&](uint32_t n) { return dp.is_leaf(n); });
-  }
-  out.sah_cost = wide_sah_cost(out, bvh, options.cost);
-  return out;
+  const bool entries_distinct = entries_are_distinct(bvh);
+  CollapseWriter writer(bvh, options.width, entries_distinct);
+  if (options.method == CollapseMethod::greedy)
+    return writer.write([&](uint32_t n, std::vector<uint32_t>& kids) { greedy_children(bvh, n, options.width, kids); },
+                        [](uint32_t) { return false; }, options.cost);
+  CollapseOptions o = options;
+  o.max_leaf_triangles = limit;
+  const OptimalCollapse dp(bvh, o, entries_distinct);
+  return writer.write([&](uint32_t n, std::vector<uint32_t>& kids) { dp.children_of(n, kids); },
+                      [&](uint32_t n) { return dp.is_leaf(n); }, options.cost);
 }
 
 double wide_sah_cost(const CollapsedBvh& wide, const FlatBvh& bvh, const WideCostModel& cost) {
@@ -385,9 +442,7 @@ double wide_sah_cost(const CollapsedBvh& wide, const FlatBvh& bvh, const WideCos
     blocks += double(bvh.nodes[wide.children[s]].box.area()) *
               double(blocks_for(wide.leaf_begin[l + 1] - wide.leaf_begin[l]));
   }
-  const double root = double(bvh.nodes[0].box.area());
-  const double total = cost.node * nodes + cost.block * blocks;
-  return root > 0.0 ? total / root : total;
+  return normalized_wide_cost(nodes, blocks, bvh, cost);
 }
 
 }  // namespace bvhopt
