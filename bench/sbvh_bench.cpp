@@ -61,6 +61,7 @@
 #include "bvhopt/tracer.h"
 #include "bvhopt/triangle_clipping.h"
 #include "bvhopt/triangle_cost.h"
+#include "bvhopt/wide_bvh.h"
 #include "bvhopt/wide_tracer.h"
 
 namespace bvhopt::bench {
@@ -316,7 +317,8 @@ nlohmann::json run_scene(const Options& opt, const std::string& spec) {
   if (opt.opt_seconds > 0) ic.limits.time_limit = opt.opt_seconds;
   const OptimizeReport rep = optimize_insertion(ours.bvh, ic);
   const double cost_opt = sah_cost(ours.bvh, ours.refs, cost);
-  const double ocost_one = optimal_collapse_cost(ours.bvh, ours.refs, cost);
+  // bake's collapse: leaves of at most the 64 triangles a wide leaf holds.
+  const double ocost_one = optimal_collapse_cost(ours.bvh, ours.refs, cost, kWideMaxLeafTriangles);
   // bake --quality best's other starts: the SBVH's own SAH leaves of up to 8, and those with
   // spatial splits only in nodes of at most 256 references, each optimized by insertion, then
   // collapsed; best keeps the cheapest of the three collapsed trees.
@@ -324,11 +326,11 @@ nlohmann::json run_scene(const Options& opt, const std::string& spec) {
   leafy.leaf.max_leaf_size = 8;
   SpatialSplitResult eight = build_spatial_split(mesh, refs, leafy);
   const OptimizeReport rep8 = optimize_insertion(eight.bvh, ic);
-  const double ocost_eight = optimal_collapse_cost(eight.bvh, eight.refs, cost);
+  const double ocost_eight = optimal_collapse_cost(eight.bvh, eight.refs, cost, kWideMaxLeafTriangles);
   leafy.spatial_max = 256;
   SpatialSplitResult limited = build_spatial_split(mesh, refs, leafy);
   const OptimizeReport rep256 = optimize_insertion(limited.bvh, ic);
-  const double ocost_limited = optimal_collapse_cost(limited.bvh, limited.refs, cost);
+  const double ocost_limited = optimal_collapse_cost(limited.bvh, limited.refs, cost, kWideMaxLeafTriangles);
   const double ocost_opt = std::min({ocost_one, ocost_eight, ocost_limited});
 
   const double wall = median(ours_wall), cpu = median(ours_cpu);
@@ -426,6 +428,7 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     // As bake: subtrees collapsed into leaves where cheaper, each triangle once in a leaf.
     CollapseConfig cc;
     cc.cost = cost;
+    cc.max_leaf_size = kWideMaxLeafTriangles;
     const double collapsed = collapse_leaves(tree.bvh, tree.refs, cc).cost_after;
     ocosts.push_back(collapsed);
     const FlatBvh flat = finalize(tree.bvh, tree.refs);

@@ -27,6 +27,7 @@
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/atomic_file.h"
 #include "bvhopt/triangle_cost.h"
+#include "bvhopt/wide_bvh.h"
 #include "cli_common.h"
 #include "commands.h"
 #include "optimize_progress.h"
@@ -43,6 +44,9 @@ struct BakeOptions {
   std::string time_budget;  // empty: the quality's default
   std::vector<uint32_t> start_leaf_sizes;  // empty: the quality's
   std::vector<std::string> starts;         // LEAF[:SPATIAL_MAX] each; empty: the above
+  // The collapse never makes a leaf of more references than the wide layouts hold, so that
+  // what bake writes traces in every layout (0: no limit, the paper's ocost).
+  uint32_t max_leaf_size = kWideMaxLeafTriangles;
   std::string output;
   bool json = false;
 };
@@ -210,6 +214,7 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOptio
   Stopwatch collapse_clock;
   CollapseConfig collapse;
   collapse.cost = cost;
+  collapse.max_leaf_size = opt.max_leaf_size;
   // With split references a leaf keeps each triangle once and the cost counts triangles.
   const CollapseResult c = collapse_leaves(s.bvh, s.refs, collapse);
   s.collapse_seconds = collapse_clock.seconds();
@@ -299,6 +304,7 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
               {"leaves", best.leaves},
               {"start_leaf_size", best.leaf_size},
               {"start_spatial_max", best.spatial_max},
+              {"max_leaf_size", opt.max_leaf_size},
               {"starts", starts},
               {"peak_rss_bytes", r.peak_rss},
               {"output", opt.output}});
@@ -370,6 +376,11 @@ void register_bake_command(CLI::App& app) {
           },
           "LEAF[:SPATIAL_MAX]")
       ->excludes(leaf_sizes);
+  cmd->add_option("--max-leaf-size", opt->max_leaf_size,
+                  "Never collapse into a leaf of more references than this (default: 64, the most a wide leaf "
+                  "holds, so the tree traces in every layout; 0: no limit, the paper's ocost)")
+      ->check(CLI::Range(0u, 0xffffffffu))
+      ->capture_default_str();
   opt->cost.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_option("-o,--output", opt->output, "BVH file to write")->required();

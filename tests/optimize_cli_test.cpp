@@ -214,6 +214,28 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
       << err;
   EXPECT_EQ(nlohmann::json::parse(out)["starts"].size(), 2u);
 
+  // What bake writes traces in every layout: its collapse stops at the 64 triangles a wide
+  // leaf holds, even where one leaf would cost less (here c_T so high that the whole scene
+  // would be one leaf). --max-leaf-size 0 lifts the limit; then only bvh2 traces it.
+  const std::string dense = "'builtin:atrium?triangles=4000' --ct 1000 --ci 1 --threads 2 --json -o " + one.string();
+  ASSERT_EQ(run("bake " + dense, &out, &err), 0) << err;
+  const nlohmann::json jc = nlohmann::json::parse(out);
+  EXPECT_EQ(jc["max_leaf_size"], 64);
+  BvhFile capped = read_bvh_file(one);
+  uint32_t largest = 0;
+  for (uint32_t n : capped.bvh.depth_first_order())
+    if (capped.bvh.nodes[n].is_leaf()) largest = std::max(largest, capped.bvh.nodes[n].ref_count());
+  EXPECT_LE(largest, 64u);
+  EXPECT_GT(largest, 32u);  // the limit is what stopped it
+  const std::string trace = "trace " + one.string() + " --scene 'builtin:atrium?triangles=4000' --rays random --count 200 "
+                            "--repeats 1 --threads 1";
+  EXPECT_EQ(run(trace + " --layout bvh8", nullptr, &err), 0) << err;
+  ASSERT_EQ(run("bake " + dense + " --max-leaf-size 0", &out, &err), 0) << err;
+  EXPECT_LT(nlohmann::json::parse(out)["cost"].get<double>(), jc["cost"].get<double>());
+  EXPECT_NE(run(trace + " --layout bvh8", nullptr, &err), 0);
+  EXPECT_NE(err.find("--max-leaf-size"), std::string::npos) << err;
+  EXPECT_EQ(run(trace + " --layout bvh2", nullptr, &err), 0) << err;
+
   // Another builder on request, and sweep for the other qualities.
   ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality fast --json -o " + a.string(), &out, &err), 0) << err;
   EXPECT_EQ(nlohmann::json::parse(out)["builder"], "sweep");

@@ -96,6 +96,8 @@ inline constexpr uint32_t kWideLeafFlag = 0x80000000u;
 inline constexpr uint32_t kWideEmptyChild = 0xffffffffu;
 inline constexpr uint32_t kWideOffsetMask = 0x07ffffffu;
 inline constexpr uint32_t kWideMaxBlocks = 16;
+// The most distinct triangles a wide leaf holds; a binary leaf of more cannot be laid out.
+inline constexpr uint32_t kWideMaxLeafTriangles = 4 * kWideMaxBlocks;
 inline constexpr size_t kWideUnit = 32;  // bytes per offset unit
 
 // Child boxes as SoA rows lo_x, hi_x, lo_y, hi_y, lo_z, hi_z (padded outward, see

@@ -17,7 +17,6 @@ namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr uint32_t kNoSet = 0xffffffffu;
-constexpr uint32_t kMaxLeafTriangles = 4 * kWideMaxBlocks;
 
 uint32_t left_of(uint32_t n) { return n + 1; }
 uint32_t right_of(const FlatBvh& bvh, uint32_t n) { return bvh.nodes[n].index; }
@@ -201,9 +200,11 @@ class CollapseWriter {
       out_.leaf_triangles.insert(out_.leaf_triangles.end(), set_.begin(), set_.end());
     }
     const size_t n = out_.leaf_triangles.size() - first;
-    if (n > kMaxLeafTriangles)
+    if (n > kWideMaxLeafTriangles)
       throw Error("collapse: a leaf of " + std::to_string(n) + " distinct triangles; wide leaves hold at most " +
-                  std::to_string(kMaxLeafTriangles) + " (build with a smaller leaf size)");
+                  std::to_string(kWideMaxLeafTriangles) +
+                  " (build with a smaller leaf size, collapse with a leaf limit of at most that: compact or bake "
+                  "--max-leaf-size, or trace the binary layout)");
     block_area_ += double(bvh_.nodes[flat].box.area()) * double(blocks_for(uint32_t(n)));
     out_.leaf_begin.push_back(uint32_t(out_.leaf_triangles.size()));
     return uint32_t(out_.leaf_begin.size() - 2);
@@ -420,7 +421,7 @@ CollapsedBvh collapse_to_wide(const FlatBvh& bvh, const CollapseOptions& options
   if (options.width != 4 && options.width != 8)
     throw Error("collapse: width " + std::to_string(options.width) + " (4 or 8)");
   if (bvh.nodes.empty()) throw Error("collapse: the tree has no nodes");
-  const uint32_t limit = std::min(options.max_leaf_triangles, kMaxLeafTriangles);
+  const uint32_t limit = std::min(options.max_leaf_triangles, kWideMaxLeafTriangles);
   const bool entries_distinct = entries_are_distinct(bvh);
   CollapseWriter writer(bvh, options.width, entries_distinct);
   if (options.method == CollapseMethod::greedy)
