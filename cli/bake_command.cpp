@@ -116,9 +116,10 @@ struct BakeResult {
 // Sponza and the CAD engine lose (143.81 against 142.10, 226.21 against 214.57). The tables are in
 // docs/spatial-splits.md. No start wins everywhere, and all converge in seconds on the
 // shared scenes, so best runs them all and keeps the cheapest.
-std::vector<StartSpec> default_starts(const std::string& quality) {
-  if (quality != "best") return {{1, 0}};
-  return {{1, 0}, {8, 0}, {8, 256}};
+// The first two take --spatial-max (0 unless given).
+std::vector<StartSpec> default_starts(const std::string& quality, uint32_t spatial_max) {
+  if (quality != "best") return {{1, spatial_max}};
+  return {{1, spatial_max}, {8, spatial_max}, {8, 256}};
 }
 
 // "8" or "8:256" (leaf size, spatial_max).
@@ -155,7 +156,7 @@ std::vector<StartSpec> starts_of(const BakeOptions& opt, const SceneBuilderOptio
   else if (!opt.start_leaf_sizes.empty())
     for (uint32_t leaf : opt.start_leaf_sizes) wanted.push_back({leaf, builder.sbvh.spatial_max});
   else
-    wanted = default_starts(opt.quality);
+    wanted = default_starts(opt.quality, builder.sbvh.spatial_max);
   std::vector<StartSpec> out;
   for (StartSpec s : wanted) {
     if (builder.name != "sbvh") s.spatial_max = 0;
@@ -362,7 +363,8 @@ void register_bake_command(CLI::App& app) {
           ->type_name("N,...");
   cmd->add_option("--starts", opt->starts,
                   "As --start-leaf-sizes, each start a leaf size and, for sbvh, the largest node that tries spatial "
-                  "splits (0: all). Default: 1,8,8:256 for --quality best, 1 otherwise")
+                  "splits (0: all). Default: 1,8,8:256 for --quality best, 1 otherwise (with --spatial-max M: 1:M,8:M,8:256 "
+                  "and 1:M)")
       ->delimiter(',')
       ->type_name("LEAF[:SPATIAL_MAX],...")
       ->check(

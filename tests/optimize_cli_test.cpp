@@ -197,6 +197,18 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
             0)
       << err;
   EXPECT_EQ(nlohmann::json::parse(out)["cost"].get<double>(), c256);
+  // --spatial-max applies to the default starts too: the first two take it, and a start
+  // equal to an earlier one runs once.
+  ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality best --spatial-max 256 --threads 2 --json -o " +
+                    one.string(),
+                &out, &err),
+            0)
+      << err;
+  const nlohmann::json jm = nlohmann::json::parse(out);
+  ASSERT_EQ(jm["starts"].size(), 2u);
+  EXPECT_EQ(jm["starts"][0]["spatial_max"], 256);
+  EXPECT_EQ(jm["starts"][1]["spatial_max"], 256);
+  EXPECT_EQ(jm["starts"][1]["cost"].get<double>(), c256);
   for (const char* bad : {"0", "8:", "8:x", ":8", "70000", "8:-1", "8:1:2"}) {
     EXPECT_NE(run("bake 'builtin:atrium?triangles=4000' --starts " + std::string(bad) + " -o " + one.string(), nullptr,
                   &err),
