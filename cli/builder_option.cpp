@@ -18,7 +18,8 @@ void add_budget_option(CLI::App* app, SpatialSplitParams& params) {
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   app->add_option("--split-node-alpha", params.node_alpha,
-                  "sbvh: ... and by more than this fraction of the node's own area (0: the root's test alone)")
+                  "sbvh: and only where they also overlap by more than this fraction of the node's own area (0: "
+                  "--split-alpha's test alone)")
       ->check(finite_number())
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
