@@ -2,7 +2,9 @@
 // to a triangle's plane, zero-area triangles.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <random>
 #include <vector>
 
@@ -23,6 +25,34 @@ Ray ray_towards(const Vec3& from, const Vec3& to) {
 bool hits(const Ray& ray, const Triangle& tri) {
   Hit h;
   return intersect_triangle(ray, tri, h);
+}
+
+// The scale is read from the float's bits on the fast path; it must be the power of two
+// frexp and ldexp give, for every exponent (subnormal, the two ends of the range) and for
+// the values that take no scale at all.
+TEST(RayTriangle, DirectionScaleIsThePowerOfTwoFrexpGives) {
+  const auto reference = [](float x) {
+    if (!(x > 0.0f) || !std::isfinite(x)) return 1.0f;
+    int e = 0;
+    std::frexp(x, &e);
+    return std::ldexp(1.0f, -std::clamp(e, -126, 127));
+  };
+  std::mt19937 rng(7);
+  size_t checked = 0;
+  for (uint32_t biased = 0; biased < 256; ++biased)
+    for (uint32_t mantissa : {0u, 1u, 0x400000u, 0x7fffffu, uint32_t(rng() & 0x7fffffu), uint32_t(rng() & 0x7fffffu)})
+      for (uint32_t sign : {0u, 1u}) {
+        const float x = __builtin_bit_cast(float, (sign << 31) | (biased << 23) | mantissa);
+        const float got = mt_direction_scale(x), want = reference(x);
+        ASSERT_EQ(__builtin_bit_cast(uint32_t, got), __builtin_bit_cast(uint32_t, want)) << "x = " << x;
+        if (x > 0.0f && std::isnormal(x) && std::isnormal(got)) {
+          // The scaled value lands in [0.5, 1), the range the tests rely on.
+          EXPECT_GE(x * got, 0.5f) << x;
+          EXPECT_LT(x * got, 1.0f) << x;
+        }
+        ++checked;
+      }
+  EXPECT_EQ(checked, 256u * 6u * 2u);
 }
 
 TEST(RayTriangle, HitFillsDistanceAndBarycentrics) {

@@ -314,6 +314,20 @@ inline const T* at_unit(const std::byte* arena, uint32_t word) {
   return reinterpret_cast<const T*>(arena + size_t(word & kWideOffsetMask) * kWideUnit);
 }
 
+// Asks for the four cache lines at a child word's target (a whole node, or the first of a
+// leaf's blocks). The traversal is a chain of dependent loads, each node's address known
+// only once its parent's slab test is done, so on incoherent rays most of a step is the wait
+// for the node; the next pop is known earlier than that (see traverse). Measured on
+// Conference and armadillo (1 thread): random rays +5 %, AO rays +1 to 5 %, primary rays,
+// whose nodes are mostly in cache already, -1 to 2 %.
+inline __attribute__((always_inline)) void prefetch_unit(const std::byte* arena, uint32_t word) {
+  const char* p = reinterpret_cast<const char*>(arena + size_t(word & kWideOffsetMask) * kWideUnit);
+  _mm_prefetch(p, _MM_HINT_T0);
+  _mm_prefetch(p + 64, _MM_HINT_T0);
+  _mm_prefetch(p + 128, _MM_HINT_T0);
+  _mm_prefetch(p + 192, _MM_HINT_T0);
+}
+
 // The traversal stack (two arrays, see Batch).
 struct Stack {
   uint32_t* words;
@@ -409,6 +423,12 @@ bool traverse(const Batch& batch, const Ray& ray, Hit& out, TraceCounters& count
     while (!(word & kWideLeafFlag)) {
       const Node& n = *at_unit<Node>(arena, word);
       ++steps;
+      // The layout puts a node's leaf blocks right after it, then its first inner child:
+      // asked for now, their fetch overlaps the node's own (armadillo, 1 thread: random rays
+      // +10 %, AO +4 %, primary unchanged; two lines did better than four).
+      const char* after = reinterpret_cast<const char*>(&n + 1);
+      _mm_prefetch(after, _MM_HINT_T0);
+      _mm_prefetch(after + 64, _MM_HINT_T0);
       uint32_t mask = slab_test<W>(n.bounds, r, best.t, tnear);
       if (mask == 0) goto pop;
       if ((mask & (mask - 1)) == 0) {
@@ -416,9 +436,15 @@ bool traverse(const Batch& batch, const Ray& ray, Hit& out, TraceCounters& count
         continue;
       }
       word = order_children<W, kOrder>(n, r.octant, mask, tnear, stack);
+      // The next nearest child, pushed just now: popped as soon as the nearest one's subtree
+      // is done, often after a step or two in a wide tree.
+      prefetch_unit(arena, stack.words[stack.size - 1]);
     }
     {
       ++steps;
+      // The stack top is what comes after this leaf unless the leaf hits nearer: its fetch
+      // overlaps the triangle tests.
+      if (stack.size != 0) prefetch_unit(arena, stack.words[stack.size - 1]);
       const bool hit = test_leaf<kTest>(arena, word, r, best, tests);
       found |= hit;
       if (kAny && hit) goto done;
