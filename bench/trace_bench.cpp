@@ -16,7 +16,8 @@
 // into bvh8 and bvh4 and traced by the wide tracer (the ISA default_isa() picks), the best
 // bvh8 also on 2 threads, beside Embree MEDIUM and HIGH. --wide-variants adds the best bvh8
 // with the other choices: distance-sorted children, the watertight triangle test, the greedy
-// collapse and every ISA the CPU has. --fit-costs prints, per row, the wide tracer's nodes and
+// collapse, the collapse with c_blk = 0.7, 1 and 1.5 (c_node = 1; to recalibrate the
+// default 1 : 0.5 on another CPU) and every ISA the CPU has. --fit-costs prints, per row, the wide tracer's nodes and
 // blocks per ray beside its ns/ray, the data the wide cost model is calibrated from.
 //
 // Every figure is the median of R timed passes; the candidates are timed round-robin within
@@ -349,6 +350,15 @@ std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mes
       o = {};
       o.layout.collapse.method = CollapseMethod::greedy;
       add(t, "bvh8-greedy", o);
+      // The collapse's cost ratio, to calibrate c_blk : c_node on this CPU (c_node = 1; the
+      // default c_blk is 0.5).
+      for (double block : {0.7, 1.0, 1.5}) {
+        o = {};
+        o.layout.collapse.cost.block = block;
+        char suffix[32];
+        std::snprintf(suffix, sizeof suffix, "bvh8-blk%.1f", block);
+        add(t, suffix, o);
+      }
       for (Isa isa : {Isa::sse42, Isa::avx2, Isa::avx512}) {
         if (!isa_supported(isa)) continue;
         o = {};

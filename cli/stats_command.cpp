@@ -84,7 +84,8 @@ void run_stats(const StatsOptions& opt) {
             << "area sums   inner " << format_double(st.inner_area_sum / st.root_area, 2) << ", leaves "
             << format_double(st.leaf_area_sum / st.root_area, 2) << " (relative to the root)\n"
             << "wide SAH    bvh4 " << format_double(wide_sah[0], 3) << ", bvh8 " << format_double(wide_sah[1], 3)
-            << "   (SAH-optimal collapse, c_node 1, c_blk 1)\n";
+            << "   (SAH-optimal collapse, c_node " << WideCostModel{}.node << ", c_blk " << WideCostModel{}.block
+            << ")\n";
   if (opt.per_depth) {
     std::cout << "depth  inner_area/root  leaf_area/root\n";
     for (size_t d = 0; d < st.inner_area_by_depth.size(); ++d)

@@ -3,6 +3,7 @@
 // subdivision; the kernels against each other hit for hit; awkward rays for the slab test.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <random>
@@ -22,6 +23,7 @@
 #include "bvhopt/tree_rotations.h"
 #include "bvhopt/wide_tracer.h"
 #include "test_support.h"
+#include "trace/wide_kernels.h"
 
 namespace bvhopt {
 namespace {
@@ -257,6 +259,67 @@ TEST(WideTrace, EveryIsaAgreesHitForHitAndCountsTheSameWork) {
       }
     }
   }
+}
+
+// The kernel orders children with branches for coherent batches and (AVX-512) without for
+// the others; the choice rests on rays_coherent. Camera rays must count as coherent and
+// secondary rays, or camera rays in random order, must not.
+TEST(WideTrace, CameraRaysAreCoherentAndSecondaryRaysAreNot) {
+  const Mesh mesh = testing::random_mesh(2000, 31, false);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 4);
+  const std::vector<RaySet> sets = ray_sets_for(mesh, flat, 3000, {RayKind::primary, RayKind::random, RayKind::ao});
+  EXPECT_TRUE(wide_kernels::rays_coherent(sets[0].rays.data(), sets[0].rays.size()));
+  EXPECT_FALSE(wide_kernels::rays_coherent(sets[1].rays.data(), sets[1].rays.size()));
+  EXPECT_FALSE(wide_kernels::rays_coherent(sets[2].rays.data(), sets[2].rays.size()));
+  std::vector<Ray> shuffled = sets[0].rays;
+  std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937(3));
+  EXPECT_FALSE(wide_kernels::rays_coherent(shuffled.data(), shuffled.size()));
+  // A ray alone, or none, takes the branches (their history carries over between calls).
+  EXPECT_TRUE(wide_kernels::rays_coherent(sets[1].rays.data(), 1));
+  EXPECT_TRUE(wide_kernels::rays_coherent(nullptr, 0));
+}
+
+// Both ways of ordering push the same children in the same order, so the same rays traced
+// as a coherent batch and as a shuffled one give the same hits and the same work, ray by ray.
+TEST(WideTrace, CoherentAndIncoherentBatchesGiveTheSameHitsAndWork) {
+  const Mesh mesh = testing::random_mesh(3000, 33, true);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 4);
+  const RaySet camera = ray_sets_for(mesh, flat, 3072, {RayKind::primary})[0];
+  std::vector<size_t> order(camera.rays.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::shuffle(order.begin(), order.end(), std::mt19937(4));
+  std::vector<Ray> shuffled(order.size());
+  for (size_t i = 0; i < order.size(); ++i) shuffled[i] = camera.rays[order[i]];
+  ASSERT_TRUE(wide_kernels::rays_coherent(camera.rays.data(), camera.rays.size()));
+  ASSERT_FALSE(wide_kernels::rays_coherent(shuffled.data(), shuffled.size()));
+  for (Isa isa : machine_isas())
+    for (uint32_t w : {4u, 8u}) {
+      const WideTracer tracer = make_tracer(flat, mesh, {w, TriangleTest::moller_trumbore, NearFirst::octant_order, isa});
+      std::vector<Hit> in_order(camera.rays.size()), mixed(camera.rays.size());
+      TraceCounters a, b;
+      tracer.closest(camera.rays.data(), camera.rays.size(), in_order.data(), a);
+      tracer.closest(shuffled.data(), shuffled.size(), mixed.data(), b);
+      EXPECT_EQ(a.steps, b.steps) << isa_name(isa) << " bvh" << w;
+      EXPECT_EQ(a.triangle_tests, b.triangle_tests) << isa_name(isa) << " bvh" << w;
+      size_t hits = 0;
+      for (size_t i = 0; i < order.size(); ++i) {
+        const Hit& x = in_order[order[i]];
+        const Hit& y = mixed[i];
+        ASSERT_EQ(x.triangle_id, y.triangle_id) << isa_name(isa) << " bvh" << w << " ray " << order[i];
+        ASSERT_EQ(x.t, y.t);
+        hits += x.triangle_id != kNoHit;
+      }
+      EXPECT_GT(hits, order.size() / 10) << "the camera must see the mesh for this test to mean anything";
+      // Every ray alone gives the same too.
+      for (size_t i = 0; i < 64; ++i) {
+        TraceCounters c;
+        const Hit h = tracer.closest(camera.rays[i * 37], c);
+        ASSERT_EQ(h.triangle_id, in_order[i * 37].triangle_id);
+        ASSERT_EQ(h.t, in_order[i * 37].t);
+      }
+    }
 }
 
 TEST(WideTrace, HitsSomethingAndMissesSomething) {

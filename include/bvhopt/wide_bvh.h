@@ -16,15 +16,18 @@ namespace bvhopt {
 
 // The wide SAH cost: C = [c_node * sum_nodes A(n) + c_blk * sum_leaves A(l) * ceil(p(l)/4)]
 // / A(root), p(l) the distinct triangles of leaf l (a leaf block tests 4 triangles at once).
-// Calibrated on the benchmark machine (Xeon, AVX-512 kernel, 1 thread) by tracing Sponza's
-// and bunny's best trees collapsed with c_node : c_blk = 2:1, 1:1, 1:2, 1:0.7 and 1:0.5 and
-// timing primary, random and AO rays against Embree in the same run: no ratio was faster
-// than 1:1 beyond the run-to-run noise (about 5%), consistent with the counters
-// (bench/trace_bench --fit-costs prints nodes and blocks per ray beside ns/ray), where a node
-// visit and a block test cost about the same. Only the ratio matters to the collapse.
+// Only the ratio matters to the collapse. Calibrated by tracing the best trees of the shared
+// scenes collapsed with c_blk = 0.5, 0.7, 1 and 1.5 (c_node = 1) against Embree in the same
+// run (bench/trace_bench --wide-variants; primary, random and AO rays, 1 thread). On a Xeon
+// (AVX-512) no ratio beat 1:1 beyond the noise. On Zen 4 (AVX-512 kernel), once the kernel
+// prefetched a node's leaf blocks with the node, 0.5 was ahead in each of four runs (geometric
+// mean over the runs' scene and ray pairs +0.5 to +6 %, random rays +5 to +9 %, primary and
+// AO rays mixed) and its layouts are about 10 % smaller, so 0.5 is the default.
+// bench/trace_bench --fit-costs prints nodes and blocks per ray beside ns/ray for redoing
+// this on another CPU.
 struct WideCostModel {
   double node = 1.0;   // c_node, per wide inner node visited
-  double block = 1.0;  // c_blk, per 4-triangle leaf block tested
+  double block = 0.5;  // c_blk, per 4-triangle leaf block tested
 };
 
 enum class CollapseMethod : uint8_t {

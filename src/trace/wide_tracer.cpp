@@ -1,6 +1,8 @@
 // The wide tracer: the layout plus the kernel of the chosen ISA.
 #include "bvhopt/wide_tracer.h"
 
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -31,6 +33,30 @@ WideTracer::WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOpt
   if (!isa_supported(isa_)) throw Error("wide tracer: this CPU does not support " + std::string(isa_name(isa_)));
 }
 
+namespace wide_kernels {
+bool rays_coherent(const Ray* rays, size_t count) {
+  // One ray alone (a renderer's call per ray): the branches' history carries over from call
+  // to call, which is what coherent rays need.
+  if (count < 2) return true;
+  const size_t pairs = std::min<size_t>(32, count - 1);
+  size_t alike = 0;
+  for (size_t k = 0; k < pairs; ++k) {
+    // Spread by the golden ratio, not evenly: an even stride can fall in step with an
+    // image's rows and land every pair on a row's end or its middle, where neighbours differ.
+    const double spread = std::fmod(0.5 + 0.6180339887498949 * double(k), 1.0);
+    const size_t i = std::min(count - 2, size_t(spread * double(count - 1)));
+    const Vec3 a = rays[i].dir, b = rays[i + 1].dir;
+    const bool same_octant = (a.x < 0) == (b.x < 0) && (a.y < 0) == (b.y < 0) && (a.z < 0) == (b.z < 0);
+    const double dot = double(a.x) * b.x + double(a.y) * b.y + double(a.z) * b.z;
+    const double aa = double(a.x) * a.x + double(a.y) * a.y + double(a.z) * a.z;
+    const double bb = double(b.x) * b.x + double(b.y) * b.y + double(b.z) * b.z;
+    // cos >= 0.999, about 2.6 degrees, without a square root: dot^2 >= 0.998 |a|^2 |b|^2.
+    if (same_octant && dot > 0.0 && dot * dot >= 0.998001 * aa * bb) ++alike;
+  }
+  return alike * 8 >= pairs * 7;
+}
+}  // namespace wide_kernels
+
 namespace {
 template <class Fill>
 void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, TraceCounters& counters, Fill&& fill) {
@@ -54,6 +80,7 @@ void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, TraceCounters& cou
   b.near_first = order;
   b.counters = &counters;
   fill(b);
+  b.coherent = wide_kernels::rays_coherent(b.rays, b.count);
   kernel_for(isa)(b);
 }
 }  // namespace
