@@ -369,7 +369,7 @@ inline __attribute__((always_inline)) uint32_t order_children(const typename Wid
       // mask; compression packs the entered ones; one store pushes them all. No branch, so
       // nothing to mispredict on incoherent rays; but the next node's address waits for the
       // whole chain, where the walk below lets a predicted branch fetch it early (Zen 4, bvh8,
-      // 1 thread: random rays 1-13 % faster this way on 10 of 11 scenes, primary rays 15-25 %
+      // 1 thread: random rays 1-13 % faster this way on 10 of 11 scenes, primary rays 9-25 %
       // slower on the 4 measured). trace_all picks by the batch's coherence.
       const __m256i shifts = _mm256_setr_epi32(21, 18, 15, 12, 9, 6, 3, 0);
       const __m256i far_first =
