@@ -81,8 +81,7 @@ struct StartSpec {
 
 // One start of the pipeline: the build, insertion, the collapse.
 struct BakeStart {
-  uint32_t leaf_size = 1;
-  uint32_t spatial_max = 0;
+  StartSpec spec;
   double build_seconds = 0.0, optimize_seconds = 0.0, collapse_seconds = 0.0;
   double budget_seconds = 0.0;  // the optimizer's (0: until it converges)
   double cost_built = 0.0, cost_optimized = 0.0, cost_final = 0.0;
@@ -176,8 +175,7 @@ std::string start_text(const StartSpec& s) {
 BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOption builder, const StartSpec& spec,
                      double share, ProgressLine& progress, const std::string& label) {
   BakeStart s;
-  s.leaf_size = spec.leaf_size;
-  s.spatial_max = spec.spatial_max;
+  s.spec = spec;
   builder.sbvh.spatial_max = spec.spatial_max;
   progress.update("building " + std::to_string(mesh.triangle_count()) + " triangles" + label, true);
   const CostModel cost = opt.cost.model();
@@ -272,8 +270,8 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
   nlohmann::json starts = nlohmann::json::array();
   for (const BakeStart& s : r.starts) {
     build += s.build_seconds, optimize += s.optimize_seconds, collapse += s.collapse_seconds;
-    starts.push_back({{"leaf_size", s.leaf_size},
-                      {"spatial_max", s.spatial_max},
+    starts.push_back({{"leaf_size", s.spec.leaf_size},
+                      {"spatial_max", s.spec.spatial_max},
                       {"references", s.references},
                       {"build_seconds", s.build_seconds},
                       {"time_budget_seconds", s.budget_seconds},
@@ -303,8 +301,8 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
               {"passes", best.report.passes},
               {"stop_reason", std::string(stop_reason_name(best.report.stop_reason))},
               {"leaves", best.leaves},
-              {"start_leaf_size", best.leaf_size},
-              {"start_spatial_max", best.spatial_max},
+              {"start_leaf_size", best.spec.leaf_size},
+              {"start_spatial_max", best.spec.spatial_max},
               {"max_leaf_size", opt.max_leaf_size},
               {"starts", starts},
               {"peak_rss_bytes", r.peak_rss},
@@ -318,7 +316,7 @@ void print_bake_summary(const BakeOptions& opt, const BakeResult& r) {
   for (size_t k = 0; k < r.starts.size(); ++k) {
     const BakeStart& s = r.starts[k];
     if (r.starts.size() > 1)
-      std::cout << "start " << k + 1 << "    " << start_text({s.leaf_size, s.spatial_max})
+      std::cout << "start " << k + 1 << "    " << start_text(s.spec)
                 << (k == r.kept ? " (kept: lowest cost)" : "") << "\n";
     std::cout << "build      " << r.builder << " (" << s.references << " references), cost "
               << format_double(s.cost_built, 4) << ", " << format_double(s.build_seconds, 2) << " s\n"
