@@ -17,7 +17,7 @@
 // bvh8 also on 2 threads, beside Embree MEDIUM and HIGH. --wide-variants adds the best bvh8
 // with the other choices: distance-sorted children, the watertight triangle test, the greedy
 // collapse, the collapse with c_blk = 0.7, 1 and 1.5 (c_node = 1; to recalibrate the
-// default 1 : 0.5 on another CPU) and every ISA the CPU has. --fit-costs prints, per row, the wide tracer's nodes and
+// default 1 : 0.5 on another CPU), every ISA the CPU has, and 1 and 2 rays traced side by side. --fit-costs prints, per row, the wide tracer's nodes and
 // blocks per ray beside its ns/ray, the data the wide cost model is calibrated from.
 //
 // Every figure is the median of R timed passes; the candidates are timed round-robin within
@@ -364,6 +364,13 @@ std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mes
         o = {};
         o.isa = isa;
         add(t, "bvh8-" + std::string(isa_name(isa)), o);
+      }
+      // Rays traced one after the other and 2 side by side (the default is 4 on scattered
+      // batches; the same on the others).
+      for (uint32_t lanes : {1u, 2u}) {
+        o = {};
+        o.lanes = lanes;
+        add(t, "bvh8-lanes" + std::to_string(lanes), o);
       }
     }
   }

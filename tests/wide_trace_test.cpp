@@ -322,6 +322,97 @@ TEST(WideTrace, CoherentAndIncoherentBatchesGiveTheSameHitsAndWork) {
     }
 }
 
+// The kernel traces rays side by side where neighbouring rays start far apart; the choice
+// rests on rays_scattered. Random rays must count as scattered; camera, ambient occlusion
+// and shadow rays (their origins a pixel's footprint apart, or the same) must not.
+TEST(WideTrace, RandomRaysAreScatteredAndRaysFromTheCameraAreNot) {
+  const Mesh mesh = testing::random_mesh(2000, 31, false);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 4);
+  const float apart = wide_kernels::scatter_distance(flat.nodes[0].box);
+  ASSERT_GT(apart, 0.0f);
+  const std::vector<RaySet> sets =
+      ray_sets_for(mesh, flat, 3000, {RayKind::primary, RayKind::random, RayKind::ao, RayKind::shadow});
+  EXPECT_FALSE(wide_kernels::rays_scattered(sets[0].rays.data(), sets[0].rays.size(), apart));
+  EXPECT_TRUE(wide_kernels::rays_scattered(sets[1].rays.data(), sets[1].rays.size(), apart));
+  EXPECT_FALSE(wide_kernels::rays_scattered(sets[2].rays.data(), sets[2].rays.size(), apart));
+  EXPECT_FALSE(wide_kernels::rays_scattered(sets[3].rays.data(), sets[3].rays.size(), apart));
+  // The same ambient occlusion rays out of order start all over the mesh.
+  std::vector<Ray> shuffled = sets[2].rays;
+  std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937(3));
+  EXPECT_TRUE(wide_kernels::rays_scattered(shuffled.data(), shuffled.size(), apart));
+  // One ray, none, NaN origins, an empty scene: nothing to overlap, or nothing to judge by.
+  EXPECT_FALSE(wide_kernels::rays_scattered(sets[1].rays.data(), 1, apart));
+  EXPECT_FALSE(wide_kernels::rays_scattered(nullptr, 0, apart));
+  std::vector<Ray> nan_rays = sets[1].rays;
+  for (Ray& r : nan_rays) r.org.x = std::nanf("");
+  EXPECT_FALSE(wide_kernels::rays_scattered(nan_rays.data(), nan_rays.size(), apart));
+  EXPECT_EQ(wide_kernels::scatter_distance(Box::empty()), 0.0f);
+}
+
+// Rays traced side by side visit the same nodes in the same order as alone: every lane count
+// gives the same hits, bit for bit, and the same counted work, on every ISA, width, triangle
+// test and child order, for closest and any hits, and for batches smaller than the lanes or
+// not a multiple of them.
+TEST(WideTrace, RaysTracedSideBySideGiveTheSameHitsAndWork) {
+  const Mesh mesh = testing::random_mesh(3000, 35, true);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 4);
+  const RaySet random = ray_sets_for(mesh, flat, 2000, {RayKind::random})[0];
+  const std::vector<Ray>& rays = random.rays;
+  ASSERT_TRUE(wide_kernels::rays_scattered(rays.data(), rays.size(), wide_kernels::scatter_distance(flat.nodes[0].box)))
+      << "the rays must be traced side by side for this test to mean anything";
+  // Batches of these sizes, one after another, cover the whole set (several too small for
+  // four lanes, and odd).
+  const std::vector<size_t> batch_sizes{1, 2, 3, 5, 7, 64, 255, 1000};
+  for (const Variant& v : all_variants()) {
+    std::vector<Hit> reference;
+    std::vector<uint8_t> reference_any;
+    TraceCounters reference_counters;
+    for (uint32_t lanes = 1; lanes <= kMaxTraceLanes; ++lanes) {
+      WideTracerOptions o;
+      o.layout.collapse.width = v.width;
+      o.layout.test = v.test;
+      o.isa = v.isa;
+      o.near_first = v.order;
+      o.lanes = lanes;
+      const WideTracer tracer(flat, mesh, o);
+      std::vector<Hit> hits(rays.size());
+      std::vector<uint8_t> any(rays.size());
+      TraceCounters counters;
+      for (size_t begin = 0, k = 0; begin < rays.size(); ++k) {
+        const size_t n = std::min(batch_sizes[k % batch_sizes.size()], rays.size() - begin);
+        tracer.closest(rays.data() + begin, n, hits.data() + begin, counters);
+        tracer.any(rays.data() + begin, n, any.data() + begin, counters);
+        begin += n;
+      }
+      if (lanes == 1) {
+        reference = hits;
+        reference_any = any;
+        reference_counters = counters;
+        size_t hit = 0;
+        for (const Hit& h : hits) hit += h.hit();
+        ASSERT_GT(hit, rays.size() / 10) << v.name() << ": the rays must hit the mesh for this test to mean anything";
+        ASSERT_LT(hit, rays.size());
+        continue;
+      }
+      EXPECT_EQ(counters.steps, reference_counters.steps) << v.name() << " lanes " << lanes;
+      EXPECT_EQ(counters.triangle_tests, reference_counters.triangle_tests) << v.name() << " lanes " << lanes;
+      for (size_t i = 0; i < rays.size(); ++i) {
+        ASSERT_EQ(hits[i].triangle_id, reference[i].triangle_id) << v.name() << " lanes " << lanes << " ray " << i;
+        ASSERT_EQ(hits[i].t, reference[i].t) << v.name() << " lanes " << lanes << " ray " << i;
+        ASSERT_EQ(hits[i].u, reference[i].u);
+        ASSERT_EQ(hits[i].v, reference[i].v);
+        ASSERT_EQ(any[i], reference_any[i]) << v.name() << " lanes " << lanes << " ray " << i;
+        ASSERT_EQ(any[i] != 0, reference[i].hit()) << v.name() << " lanes " << lanes << " ray " << i;
+      }
+    }
+  }
+  WideTracerOptions too_many;
+  too_many.lanes = kMaxTraceLanes + 1;
+  EXPECT_THROW(WideTracer(flat, mesh, too_many), Error);
+}
+
 TEST(WideTrace, HitsSomethingAndMissesSomething) {
   // Guards the comparisons above against a vacuous pass.
   const Mesh mesh = testing::random_mesh(1200, 21, true);

@@ -40,7 +40,13 @@ struct WideTracerOptions {
   WideLayoutOptions layout;
   std::optional<Isa> isa;  // default: default_isa()
   NearFirst near_first = NearFirst::octant_order;
+  // Rays traced side by side on batches of scattered rays (random rays; see the kernel's
+  // trace_interleaved): 0 picks the measured best (4), 1 traces one ray after the other, at
+  // most kMaxTraceLanes. Hits and counted work are the same either way.
+  uint32_t lanes = 0;
 };
+
+inline constexpr uint32_t kMaxTraceLanes = 4;
 
 // Hits are exact against brute force with the same triangle test: the closest triangle, ties
 // in t going to the lowest triangle id, as brute_force_closest does, so every kernel returns
@@ -62,6 +68,7 @@ class WideTracer {
   WideBvh bvh_;
   Isa isa_;
   NearFirst near_first_;
+  uint32_t lanes_;
 };
 
 }  // namespace bvhopt

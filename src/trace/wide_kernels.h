@@ -22,10 +22,16 @@ struct Batch {
   // Whether the rays go mostly the same way, ray after ray (camera rays): the kernel then
   // orders children with branches the CPU predicts, else (AVX-512) without branches.
   bool coherent;
-  // The traversal stack as two arrays of WideBvh::stack_entries() entries: child words and
-  // the entry distances of their boxes.
+  // The traversal stacks, one per lane, each as two arrays of at least
+  // WideBvh::stack_entries() entries: child words and the entry distances of their boxes.
   uint32_t* stack_words;
   float* stack_t;
+  size_t stack_stride;  // entries per lane: lane k's stack starts at entry k * stack_stride
+  // Rays traced side by side (1: one after the other; at most kMaxTraceLanes). More than one
+  // only where ray after ray starts in a different part of the scene (random rays; not
+  // camera, ambient occlusion or shadow rays): each then reads nodes the last one did not,
+  // and their fetches can overlap.
+  uint32_t lanes;
   const Ray* rays;
   size_t count;
   Hit* hits;          // closest hits
@@ -38,6 +44,14 @@ struct Batch {
 // the same octant and within about 2.5 degrees of each other. It depends on the batch's rays
 // alone and changes the speed only: both ways visit the same nodes and give the same hits.
 bool rays_coherent(const Ray* rays, size_t count);
+
+// Whether rays[0, count) start scattered over the scene (see Batch::lanes): of the same pairs
+// as rays_coherent, at least half start more than `distance` apart.
+bool rays_scattered(const Ray* rays, size_t count, float distance);
+// The distance rays_scattered is asked about: 1/64 of the scene box's diagonal (0 for an
+// empty box). Random rays' neighbours start about half a diagonal apart; a camera's, an
+// ambient occlusion pixel's or a shadow ray's neighbours a pixel's footprint or less.
+float scatter_distance(const Box& scene);
 
 void trace_sse42(const Batch& batch);
 void trace_avx2(const Batch& batch);

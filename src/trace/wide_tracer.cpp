@@ -29,11 +29,25 @@ constexpr uint32_t kFixedStack = 512;
 }  // namespace
 
 WideTracer::WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOptions& options)
-    : bvh_(bvh, mesh, options.layout), isa_(options.isa ? *options.isa : default_isa()), near_first_(options.near_first) {
+    : bvh_(bvh, mesh, options.layout), isa_(options.isa ? *options.isa : default_isa()), near_first_(options.near_first),
+      lanes_(options.lanes == 0 ? kMaxTraceLanes : options.lanes) {
   if (!isa_supported(isa_)) throw Error("wide tracer: this CPU does not support " + std::string(isa_name(isa_)));
+  if (options.lanes > kMaxTraceLanes)
+    throw Error("wide tracer: " + std::to_string(options.lanes) + " lanes asked for, at most " +
+                std::to_string(kMaxTraceLanes));
 }
 
 namespace wide_kernels {
+namespace {
+// The first of the k-th pair of neighbours the batch tests are judged by (0 <= k < 32, count
+// >= 2). Spread by the golden ratio, not evenly: an even stride can fall in step with an
+// image's rows and land every pair on a row's end or its middle, where neighbours differ.
+size_t sample_pair(size_t k, size_t count) {
+  const double spread = std::fmod(0.5 + 0.6180339887498949 * double(k), 1.0);
+  return std::min(count - 2, size_t(spread * double(count - 1)));
+}
+}  // namespace
+
 bool rays_coherent(const Ray* rays, size_t count) {
   // One ray alone (a renderer's call per ray): the branches' history carries over from call
   // to call, which is what coherent rays need.
@@ -41,10 +55,7 @@ bool rays_coherent(const Ray* rays, size_t count) {
   const size_t pairs = std::min<size_t>(32, count - 1);
   size_t alike = 0;
   for (size_t k = 0; k < pairs; ++k) {
-    // Spread by the golden ratio, not evenly: an even stride can fall in step with an
-    // image's rows and land every pair on a row's end or its middle, where neighbours differ.
-    const double spread = std::fmod(0.5 + 0.6180339887498949 * double(k), 1.0);
-    const size_t i = std::min(count - 2, size_t(spread * double(count - 1)));
+    const size_t i = sample_pair(k, count);
     const Vec3 a = rays[i].dir, b = rays[i + 1].dir;
     const bool same_octant = (a.x < 0) == (b.x < 0) && (a.y < 0) == (b.y < 0) && (a.z < 0) == (b.z < 0);
     const double dot = double(a.x) * b.x + double(a.y) * b.y + double(a.z) * b.z;
@@ -55,23 +66,47 @@ bool rays_coherent(const Ray* rays, size_t count) {
   }
   return alike * 8 >= pairs * 7;
 }
+
+float scatter_distance(const Box& scene) {
+  if (!(scene.min.x <= scene.max.x)) return 0.0f;
+  const double dx = double(scene.max.x) - scene.min.x, dy = double(scene.max.y) - scene.min.y,
+               dz = double(scene.max.z) - scene.min.z;
+  return float(std::sqrt(dx * dx + dy * dy + dz * dz) / 64.0);
+}
+
+bool rays_scattered(const Ray* rays, size_t count, float distance) {
+  if (count < 2) return false;
+  const size_t pairs = std::min<size_t>(32, count - 1);
+  const double limit = double(distance) * double(distance);
+  size_t apart = 0;
+  for (size_t k = 0; k < pairs; ++k) {
+    const size_t i = sample_pair(k, count);
+    const Vec3 a = rays[i].org, b = rays[i + 1].org;
+    const double dx = double(a.x) - b.x, dy = double(a.y) - b.y, dz = double(a.z) - b.z;
+    // Written so that a NaN origin counts as not apart.
+    if (dx * dx + dy * dy + dz * dz > limit) ++apart;
+  }
+  return apart * 2 >= pairs;
+}
 }  // namespace wide_kernels
 
 namespace {
 template <class Fill>
-void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, TraceCounters& counters, Fill&& fill) {
-  alignas(32) uint32_t fixed_words[kFixedStack];
-  alignas(32) float fixed_t[kFixedStack];
+void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, uint32_t lanes, TraceCounters& counters, Fill&& fill) {
+  alignas(32) uint32_t fixed_words[kMaxTraceLanes * kFixedStack];
+  alignas(32) float fixed_t[kMaxTraceLanes * kFixedStack];
   std::vector<uint32_t> heap_words;
   std::vector<float> heap_t;
   wide_kernels::Batch b{};
   b.stack_words = fixed_words;
   b.stack_t = fixed_t;
+  b.stack_stride = kFixedStack;
   if (bvh.stack_entries() > kFixedStack) {
-    heap_words.resize(bvh.stack_entries());
-    heap_t.resize(bvh.stack_entries());
+    heap_words.resize(size_t(lanes) * bvh.stack_entries());
+    heap_t.resize(size_t(lanes) * bvh.stack_entries());
     b.stack_words = heap_words.data();
     b.stack_t = heap_t.data();
+    b.stack_stride = bvh.stack_entries();
   }
   b.arena = bvh.data();
   b.root = bvh.root();
@@ -81,12 +116,15 @@ void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, TraceCounters& cou
   b.counters = &counters;
   fill(b);
   b.coherent = wide_kernels::rays_coherent(b.rays, b.count);
+  const bool scattered =
+      !b.coherent && wide_kernels::rays_scattered(b.rays, b.count, wide_kernels::scatter_distance(bvh.bounds()));
+  b.lanes = scattered ? lanes : 1;
   kernel_for(isa)(b);
 }
 }  // namespace
 
 void WideTracer::closest(const Ray* rays, size_t count, Hit* hits, TraceCounters& counters) const {
-  run_kernel(bvh_, isa_, near_first_, counters, [&](wide_kernels::Batch& b) {
+  run_kernel(bvh_, isa_, near_first_, lanes_, counters, [&](wide_kernels::Batch& b) {
     b.rays = rays;
     b.count = count;
     b.hits = hits;
@@ -94,7 +132,7 @@ void WideTracer::closest(const Ray* rays, size_t count, Hit* hits, TraceCounters
 }
 
 void WideTracer::any(const Ray* rays, size_t count, uint8_t* hit, TraceCounters& counters) const {
-  run_kernel(bvh_, isa_, near_first_, counters, [&](wide_kernels::Batch& b) {
+  run_kernel(bvh_, isa_, near_first_, lanes_, counters, [&](wide_kernels::Batch& b) {
     b.rays = rays;
     b.count = count;
     b.any_hits = hit;
