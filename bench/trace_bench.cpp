@@ -490,8 +490,10 @@ int run(const Options& opt) {
     if (opt.wide) wide = wide_trees(trees, mesh, opt.wide_variants);
     for (const WideTree& w : wide) {
       const WideLayoutStats& st = w.tracer->layout().stats();
+      // One cold run, the tracer's construction included; layout_bench times the target
+      // figure (collapse + layout against the sweep build, median of several rounds).
       std::printf("# %-22s wide SAH %.3f, %.1f B/triangle (binary %.1f), collapse+layout %.1f ms = %.1f%% of the "
-                  "sweep build, isa %s\n",
+                  "sweep build (once, cold; see layout_bench), isa %s\n",
                   w.name.c_str(), st.sah_cost, double(st.bytes) / double(mesh.triangle_count()),
                   binary_bytes_per_triangle(*w.from->tracer, w.from->flat), 1e3 * w.layout_seconds,
                   100.0 * w.layout_seconds / trees[0].seconds, std::string(isa_name(w.tracer->isa())).c_str());
