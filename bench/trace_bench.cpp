@@ -17,8 +17,9 @@
 // bvh8 also on 2 threads, beside Embree MEDIUM and HIGH. --wide-variants adds the best bvh8
 // with the other choices: distance-sorted children, the watertight triangle test, the greedy
 // collapse, the collapse with c_blk = 0.7, 1 and 1.5 (c_node = 1; to recalibrate the
-// default 1 : 0.5 on another CPU), every ISA the CPU has, and 1 and 2 rays traced side by side. --fit-costs prints, per row, the wide tracer's nodes and
-// blocks per ray beside its ns/ray, the data the wide cost model is calibrated from.
+// default 1 : 0.5 on another CPU), every ISA the CPU has, and 1 and 2 rays traced side by
+// side. --fit-costs prints, per row, the wide tracer's nodes and blocks per ray beside its
+// ns/ray, the data the wide cost model is calibrated from.
 //
 // Every figure is the median of R timed passes; the candidates are timed round-robin within
 // each repeat so machine load drifts alike over all of them. Ratios are ours / Embree's.

@@ -167,8 +167,6 @@ class WideBvh {
   uint32_t stack_entries() const { return stack_entries_; }
   const WideLayoutStats& stats() const { return stats_; }
   size_t triangle_count() const { return mesh_triangles_; }
-  // The root's box (empty for an empty tree).
-  const Box& bounds() const { return bounds_; }
 
  private:
   std::unique_ptr<std::byte[], FreeArena> arena_;
@@ -177,7 +175,6 @@ class WideBvh {
   TriangleTest test_ = TriangleTest::moller_trumbore;
   uint32_t stack_entries_ = 0;
   size_t mesh_triangles_ = 0;
-  Box bounds_;
   WideLayoutStats stats_;
 };
 

@@ -69,6 +69,7 @@ class WideTracer {
   Isa isa_;
   NearFirst near_first_;
   uint32_t lanes_;
+  float scatter_distance_;  // wide_kernels::scatter_distance of the scene, computed once
 };
 
 }  // namespace bvhopt

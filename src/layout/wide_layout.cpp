@@ -302,7 +302,6 @@ WideBvh::WideBvh(const FlatBvh& bvh, const Mesh& mesh, const WideLayoutOptions& 
     if (id >= mesh_triangles_)
       throw Error("wide layout: triangle id " + std::to_string(id) + " out of range (mesh " + mesh.name + " has " +
                   std::to_string(mesh_triangles_) + " triangles)");
-  if (!bvh.nodes.empty()) bounds_ = bvh.nodes[0].box;
   auto t0 = std::chrono::steady_clock::now();
   const CollapsedBvh wide = collapse_to_wide(bvh, options.collapse);
   stats_.collapse_seconds = seconds_since(t0);

@@ -30,7 +30,8 @@ constexpr uint32_t kFixedStack = 512;
 
 WideTracer::WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOptions& options)
     : bvh_(bvh, mesh, options.layout), isa_(options.isa ? *options.isa : default_isa()), near_first_(options.near_first),
-      lanes_(options.lanes == 0 ? kMaxTraceLanes : options.lanes) {
+      lanes_(options.lanes == 0 ? kMaxTraceLanes : options.lanes),
+      scatter_distance_(bvh.nodes.empty() ? 0.0f : wide_kernels::scatter_distance(bvh.nodes[0].box)) {
   if (!isa_supported(isa_)) throw Error("wide tracer: this CPU does not support " + std::string(isa_name(isa_)));
   if (options.lanes > kMaxTraceLanes)
     throw Error("wide tracer: " + std::to_string(options.lanes) + " lanes asked for, at most " +
@@ -92,7 +93,8 @@ bool rays_scattered(const Ray* rays, size_t count, float distance) {
 
 namespace {
 template <class Fill>
-void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, uint32_t lanes, TraceCounters& counters, Fill&& fill) {
+void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, uint32_t lanes, float scatter_distance,
+                TraceCounters& counters, Fill&& fill) {
   alignas(32) uint32_t fixed_words[kMaxTraceLanes * kFixedStack];
   alignas(32) float fixed_t[kMaxTraceLanes * kFixedStack];
   std::vector<uint32_t> heap_words;
@@ -116,15 +118,14 @@ void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, uint32_t lanes, Tr
   b.counters = &counters;
   fill(b);
   b.coherent = wide_kernels::rays_coherent(b.rays, b.count);
-  const bool scattered =
-      !b.coherent && wide_kernels::rays_scattered(b.rays, b.count, wide_kernels::scatter_distance(bvh.bounds()));
+  const bool scattered = !b.coherent && wide_kernels::rays_scattered(b.rays, b.count, scatter_distance);
   b.lanes = scattered ? lanes : 1;
   kernel_for(isa)(b);
 }
 }  // namespace
 
 void WideTracer::closest(const Ray* rays, size_t count, Hit* hits, TraceCounters& counters) const {
-  run_kernel(bvh_, isa_, near_first_, lanes_, counters, [&](wide_kernels::Batch& b) {
+  run_kernel(bvh_, isa_, near_first_, lanes_, scatter_distance_, counters, [&](wide_kernels::Batch& b) {
     b.rays = rays;
     b.count = count;
     b.hits = hits;
@@ -132,7 +133,7 @@ void WideTracer::closest(const Ray* rays, size_t count, Hit* hits, TraceCounters
 }
 
 void WideTracer::any(const Ray* rays, size_t count, uint8_t* hit, TraceCounters& counters) const {
-  run_kernel(bvh_, isa_, near_first_, lanes_, counters, [&](wide_kernels::Batch& b) {
+  run_kernel(bvh_, isa_, near_first_, lanes_, scatter_distance_, counters, [&](wide_kernels::Batch& b) {
     b.rays = rays;
     b.count = count;
     b.any_hits = hit;
