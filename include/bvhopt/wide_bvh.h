@@ -69,9 +69,9 @@ struct CollapsedBvh {
   size_t leaf_count() const { return leaf_begin.size() - 1; }
 };
 
-// Collapses a finalized binary tree. Sequential and deterministic: the same tree and cost on
-// any thread count. The root is always a wide node (a tree that is one leaf becomes a root
-// with a single leaf child). Throws Error for a width other than 4 or 8.
+// Collapses a finalized binary tree, in parallel where it can. Deterministic: the same tree
+// and cost on any thread count. The root is always a wide node (a tree that is one leaf
+// becomes a root with a single leaf child). Throws Error for a width other than 4 or 8.
 CollapsedBvh collapse_to_wide(const FlatBvh& bvh, const CollapseOptions& options = {});
 
 // The wide SAH cost of a collapse, evaluated from its structure (the tests check the DP's own

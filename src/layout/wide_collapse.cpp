@@ -1,5 +1,7 @@
 // Collapsing a binary tree into a 4- or 8-wide one: the SAH-optimal dynamic program of
 // Ylitie, Karras and Laine (2017) and Embree-style greedy widening.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
 #include <algorithm>
@@ -64,29 +66,8 @@ bool entries_are_distinct(const FlatBvh& bvh) {
   return true;
 }
 
-std::vector<uint8_t> distinct_counts(const FlatBvh& bvh, uint32_t limit, bool entries_distinct) {
+std::vector<uint8_t> distinct_counts(const FlatBvh& bvh, uint32_t limit) {
   std::vector<uint8_t> count(bvh.nodes.size(), kSaturated);
-  if (entries_distinct) {
-    // The same counts by sums, without the sorted sets (most of the collapse's time on
-    // trees of unsplit triangles). `size` is kept while it is known, as the sets' sizes are.
-    std::vector<uint32_t> size(bvh.nodes.size(), 0);
-    for (size_t i = bvh.nodes.size(); i-- > 0;) {
-      const FlatNode& f = bvh.nodes[i];
-      if (f.is_leaf()) {
-        size[i] = f.count;
-        count[i] = uint8_t(std::min<uint32_t>(f.count, kSaturated));
-        continue;
-      }
-      const uint32_t l = uint32_t(i) + 1, r = f.index;
-      const bool known = count[l] != kSaturated && count[r] != kSaturated && size[l] <= limit && size[r] <= limit &&
-                         size[l] + size[r] <= limit;
-      if (known) {
-        size[i] = size[l] + size[r];
-        count[i] = uint8_t(size[i]);
-      }
-    }
-    return count;
-  }
   struct Entry {
     size_t begin;  // in pool
     uint32_t size;
@@ -132,7 +113,11 @@ double normalized_wide_cost(double nodes, double blocks, const FlatBvh& bvh, con
   return root > 0.0 ? total / root : total;
 }
 
-// Builds the output structure from a function giving each wide node's children.
+// Builds the output structure from a function giving each wide node's children. The walk
+// that numbers the nodes is sequential (depth-first numbering); it sizes each leaf from
+// `distinct(flat)` (its distinct triangles, when known) and the leaves' triangles are filled
+// in afterwards, in parallel: gathering and sorting them was half of the walk, which on 2
+// threads was the largest sequential part of collapse + layout.
 class CollapseWriter {
  public:
   // Reserved to their bounds (pages never written are never touched): no regrowth copies.
@@ -146,13 +131,15 @@ class CollapseWriter {
     out_.child_is_leaf.reserve(bvh.nodes.size());
     out_.child_index.reserve(bvh.nodes.size());
     out_.leaf_begin.reserve(leaves + 1);
-    out_.leaf_triangles.reserve(bvh.triangle_ids.size());
+    leaf_flat_.reserve(leaves);
   }
 
   // `children_of(flat, out)` appends the flat nodes that become the wide node's children;
-  // `is_leaf(flat)` says which of them are leaves. Depth-first, children in the order given.
-  template <class ChildrenOf, class IsLeaf>
-  CollapsedBvh write(ChildrenOf&& children_of, IsLeaf&& is_leaf, const WideCostModel& cost) {
+  // `is_leaf(flat)` says which of them are leaves; `distinct(flat)` is the number of distinct
+  // triangles under a leaf, or kSaturated when not known. Depth-first, children in the order
+  // given.
+  template <class ChildrenOf, class IsLeaf, class Distinct>
+  CollapsedBvh write(ChildrenOf&& children_of, IsLeaf&& is_leaf, Distinct&& distinct, const WideCostModel& cost) {
     struct Pending {
       uint32_t flat;
       uint32_t slot;  // index in out_.child_index to patch with the wide node, kNoSet for the root
@@ -176,7 +163,7 @@ class CollapseWriter {
         const bool leaf = bvh_.nodes[c].is_leaf() || is_leaf(c);
         out_.children.push_back(c);
         out_.child_is_leaf.push_back(leaf ? 1 : 0);
-        out_.child_index.push_back(leaf ? add_leaf(c) : kNoSet);
+        out_.child_index.push_back(leaf ? add_leaf(c, distinct(c)) : kNoSet);
       }
       out_.child_begin.push_back(uint32_t(out_.children.size()));
       // Reverse, so the first inner child is numbered next (depth-first).
@@ -184,52 +171,74 @@ class CollapseWriter {
         if (!out_.child_is_leaf[s]) todo.push_back({out_.children[s], uint32_t(s)});
     }
     out_.sah_cost = normalized_wide_cost(node_area_, block_area_, bvh_, cost);
+    fill_leaves();
     return std::move(out_);
   }
 
  private:
-  // Also adds the leaf's term of the wide SAH cost, in the order wide_sah_cost adds it (so
-  // the same double, without a second walk over the children's boxes).
-  uint32_t add_leaf(uint32_t flat) {
-    const size_t first = out_.leaf_triangles.size();
-    if (entries_distinct_) {
-      append_entries(flat);
-      std::sort(out_.leaf_triangles.begin() + first, out_.leaf_triangles.end());
-    } else {
-      distinct_triangles(bvh_, flat, set_, scratch_);
-      out_.leaf_triangles.insert(out_.leaf_triangles.end(), set_.begin(), set_.end());
+  // Sizes the leaf and adds its term of the wide SAH cost, in the order wide_sah_cost adds it
+  // (so the same double, without a second walk over the children's boxes).
+  uint32_t add_leaf(uint32_t flat, uint32_t known) {
+    uint32_t n = known;
+    if (n == kSaturated) {
+      // Not known (a binary leaf of more entries than the counts keep): counted here. Such a
+      // leaf is over the limit below unless its entries repeat.
+      if (entries_distinct_) {
+        n = bvh_.nodes[flat].count;
+      } else {
+        distinct_triangles(bvh_, flat, set_, scratch_);
+        n = uint32_t(set_.size());
+      }
     }
-    const size_t n = out_.leaf_triangles.size() - first;
     if (n > kWideMaxLeafTriangles)
       throw Error("collapse: a leaf of " + std::to_string(n) + " distinct triangles; wide leaves hold at most " +
                   std::to_string(kWideMaxLeafTriangles) +
                   " (build with a smaller leaf size, collapse with a leaf limit of at most that: compact or bake "
                   "--max-leaf-size, or trace the binary layout)");
-    block_area_ += double(bvh_.nodes[flat].box.area()) * double(blocks_for(uint32_t(n)));
-    out_.leaf_begin.push_back(uint32_t(out_.leaf_triangles.size()));
+    block_area_ += double(bvh_.nodes[flat].box.area()) * double(blocks_for(n));
+    out_.leaf_begin.push_back(out_.leaf_begin.back() + n);
+    leaf_flat_.push_back(flat);
     return uint32_t(out_.leaf_begin.size() - 2);
   }
 
-  // Every leaf entry under flat node n, when no triangle repeats (then they are its distinct
-  // triangles, and only need sorting).
-  void append_entries(uint32_t n) {
+  // Each leaf's distinct triangles, ascending, into its range of leaf_triangles.
+  void fill_leaves() {
+    out_.leaf_triangles.resize(out_.leaf_begin.back());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, leaf_flat_.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+      std::vector<uint32_t> set, scratch;
+      for (size_t l = r.begin(); l < r.end(); ++l) {
+        const uint32_t flat = leaf_flat_[l];
+        uint32_t* out = out_.leaf_triangles.data() + out_.leaf_begin[l];
+        const uint32_t n = out_.leaf_begin[l + 1] - out_.leaf_begin[l];
+        if (entries_distinct_) {
+          append_entries(flat, out, scratch);
+          std::sort(out, out + n);
+        } else {
+          distinct_triangles(bvh_, flat, set, scratch);
+          std::copy(set.begin(), set.end(), out);
+        }
+      }
+    });
+  }
+
+  // Every leaf entry under flat node n, written from `out` on, when no triangle repeats
+  // (then they are its distinct triangles, and only need sorting).
+  void append_entries(uint32_t n, uint32_t* out, std::vector<uint32_t>& todo) const {
     if (bvh_.nodes[n].is_leaf()) {  // most wide leaves are one binary leaf
       const FlatNode& f = bvh_.nodes[n];
-      out_.leaf_triangles.insert(out_.leaf_triangles.end(), bvh_.triangle_ids.begin() + f.index,
-                                 bvh_.triangle_ids.begin() + f.index + f.count);
+      std::copy(bvh_.triangle_ids.begin() + f.index, bvh_.triangle_ids.begin() + f.index + f.count, out);
       return;
     }
-    scratch_.assign(1, n);
-    while (!scratch_.empty()) {
-      const uint32_t i = scratch_.back();
-      scratch_.pop_back();
+    todo.assign(1, n);
+    while (!todo.empty()) {
+      const uint32_t i = todo.back();
+      todo.pop_back();
       const FlatNode& f = bvh_.nodes[i];
       if (f.is_leaf()) {
-        out_.leaf_triangles.insert(out_.leaf_triangles.end(), bvh_.triangle_ids.begin() + f.index,
-                                   bvh_.triangle_ids.begin() + f.index + f.count);
+        out = std::copy(bvh_.triangle_ids.begin() + f.index, bvh_.triangle_ids.begin() + f.index + f.count, out);
       } else {
-        scratch_.push_back(right_of(bvh_, i));
-        scratch_.push_back(left_of(i));
+        todo.push_back(right_of(bvh_, i));
+        todo.push_back(left_of(i));
       }
     }
   }
@@ -237,6 +246,7 @@ class CollapseWriter {
   const FlatBvh& bvh_;
   const bool entries_distinct_;
   std::vector<uint32_t> set_, scratch_;
+  std::vector<uint32_t> leaf_flat_;  // per leaf, its flat node
   CollapsedBvh out_;
   double node_area_ = 0.0, block_area_ = 0.0;  // the wide SAH cost's two sums
 };
@@ -255,7 +265,18 @@ class OptimalCollapse {
         choice_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size() * o.width)),
         internal_split_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size())),
         leaf_(std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size())),
-        distinct_(distinct_counts(bvh, o.max_leaf_triangles, entries_distinct)) {
+        entries_distinct_(entries_distinct) {
+    // With no triangle repeated the counts are sums, made by the DP's own bottom-up walk
+    // (serially before it, they were a seventh of collapse + layout on 2 threads, Conference);
+    // else by merging sorted sets beforehand.
+    if (entries_distinct) {
+      distinct_ = std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size());
+      size_ = std::make_unique_for_overwrite<uint32_t[]>(bvh.nodes.size());
+    } else {
+      const std::vector<uint8_t> counts = distinct_counts(bvh, o.max_leaf_triangles);
+      distinct_ = std::make_unique_for_overwrite<uint8_t[]>(bvh.nodes.size());
+      std::copy(counts.begin(), counts.end(), distinct_.get());
+    }
     const uint32_t n = uint32_t(bvh.nodes.size());
     // Areas relative to the root's: the float rows then hold the same numbers at every
     // scale of the scene (absolute areas overflow a float above extents of about 1e19).
@@ -274,6 +295,8 @@ class OptimalCollapse {
     gather(right_of(bvh_, n), width_ - k, out);
   }
   bool is_leaf(uint32_t n) const { return leaf_[n] != 0; }
+  // The distinct triangles under flat node n, kSaturated above the leaf limit.
+  uint32_t distinct(uint32_t n) const { return distinct_[n]; }
 
  private:
   static constexpr uint32_t kMaxWidth = 8;
@@ -329,6 +352,7 @@ class OptimalCollapse {
   template <uint32_t W>
   void solve_node(uint32_t i, const float* cl, const float* cr, float* c) {
     const FlatNode& f = bvh_.nodes[i];
+    if (entries_distinct_) count_entries(i, f);
     const float area = float(f.box.area() * per_area_);
     uint8_t* ch = &choice_[size_t(i) * W];
     float leaf_cost = kInf;
@@ -383,6 +407,20 @@ class OptimalCollapse {
     }
   }
 
+  // distinct_[i] from its children's, as entries (none repeats); the children come first.
+  void count_entries(uint32_t i, const FlatNode& f) {
+    if (f.is_leaf()) {
+      size_[i] = f.count;
+      distinct_[i] = uint8_t(std::min<uint32_t>(f.count, kSaturated));
+      return;
+    }
+    const uint32_t l = i + 1, r = f.index, limit = options_.max_leaf_triangles;
+    const bool known = distinct_[l] != kSaturated && distinct_[r] != kSaturated && size_[l] <= limit &&
+                       size_[r] <= limit && size_[l] + size_[r] <= limit;
+    size_[i] = known ? size_[l] + size_[r] : 0;
+    distinct_[i] = known ? uint8_t(size_[i]) : kSaturated;
+  }
+
   const FlatBvh& bvh_;
   const CollapseOptions options_;
   uint32_t width_;
@@ -390,7 +428,11 @@ class OptimalCollapse {
   std::unique_ptr<uint8_t[]> choice_;
   std::unique_ptr<uint8_t[]> internal_split_;
   std::unique_ptr<uint8_t[]> leaf_;
-  const std::vector<uint8_t> distinct_;
+  const bool entries_distinct_;
+  // Per flat node, the distinct triangles under it when at most the leaf limit, else
+  // kSaturated; size_ (when entries are distinct) the entries while they are counted.
+  std::unique_ptr<uint8_t[]> distinct_;
+  std::unique_ptr<uint32_t[]> size_;
   double per_area_ = 1.0;
 };
 
@@ -426,12 +468,13 @@ CollapsedBvh collapse_to_wide(const FlatBvh& bvh, const CollapseOptions& options
   CollapseWriter writer(bvh, options.width, entries_distinct);
   if (options.method == CollapseMethod::greedy)
     return writer.write([&](uint32_t n, std::vector<uint32_t>& kids) { greedy_children(bvh, n, options.width, kids); },
-                        [](uint32_t) { return false; }, options.cost);
+                        [](uint32_t) { return false; }, [](uint32_t) { return uint32_t(kSaturated); }, options.cost);
   CollapseOptions o = options;
   o.max_leaf_triangles = limit;
   const OptimalCollapse dp(bvh, o, entries_distinct);
   return writer.write([&](uint32_t n, std::vector<uint32_t>& kids) { dp.children_of(n, kids); },
-                      [&](uint32_t n) { return dp.is_leaf(n); }, options.cost);
+                      [&](uint32_t n) { return dp.is_leaf(n); }, [&](uint32_t n) { return dp.distinct(n); },
+                      options.cost);
 }
 
 double wide_sah_cost(const CollapsedBvh& wide, const FlatBvh& bvh, const WideCostModel& cost) {

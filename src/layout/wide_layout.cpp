@@ -37,8 +37,10 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 // all over the arena, and with 4 KiB pages most node visits would also miss the TLB (Embree
 // allocates its BVH the same way). Not cleared: the writers fill every byte, so the pages
 // are first touched by the threads that write them.
+constexpr size_t kHugePage = size_t(2) << 20;
+
 std::unique_ptr<std::byte[], WideBvh::FreeArena> allocate_arena(size_t bytes) {
-  constexpr size_t kHuge = size_t(2) << 20;
+  constexpr size_t kHuge = kHugePage;
   void* p = nullptr;
   if (posix_memalign(&p, bytes >= kHuge ? kHuge : 64, std::max<size_t>(bytes, 64)) != 0)
     throw Error("wide layout: out of memory for " + std::to_string(bytes) + " bytes");
@@ -87,6 +89,11 @@ class LayoutBuilder {
   std::unique_ptr<std::byte[], WideBvh::FreeArena> write() {
     auto arena = allocate_arena(bytes_);
     std::byte* base = arena.get();
+    // One thread first touches one byte per huge page: when two threads' writes both fault
+    // on huge pages, the faults contend (Conference, bvh8, 2 threads: the layout took 10.9 ms
+    // against 8.9 on one thread; with these touches first, 4.9 to 6.2 ms). Where no huge
+    // pages are granted this is one small page per 2 MiB.
+    for (size_t k = 0; k < bytes_; k += kHugePage) *reinterpret_cast<volatile char*>(base + k) = 0;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, wide_.node_count(), 512), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t w = r.begin(); w < r.end(); ++w) {
         if (w + 1 < r.end()) prefetch_node(uint32_t(w + 1));
