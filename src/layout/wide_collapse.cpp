@@ -113,25 +113,18 @@ double normalized_wide_cost(double nodes, double blocks, const FlatBvh& bvh, con
   return root > 0.0 ? total / root : total;
 }
 
-// Builds the output structure from a function giving each wide node's children. The walk
-// that numbers the nodes is sequential (depth-first numbering); it sizes each leaf from
-// `distinct(flat)` (its distinct triangles, when known) and the leaves' triangles are filled
-// in afterwards, in parallel: gathering and sorting them was half of the walk, which on 2
-// threads was the largest sequential part of collapse + layout.
+// Builds the output structure from a function giving each wide node's children. Wide nodes
+// are numbered depth-first. The subtrees under the root's inner children are walked in
+// parallel, each numbered from 0 in a piece of its own, and the pieces are then put one after
+// the other: the same numbering as one walk. Each leaf is sized from
+// `distinct(flat)` (its distinct triangles, when known) and the leaves' triangles are filled in
+// last, in parallel. (On 2 threads the one sequential walk that did all of it was the largest
+// part of collapse + layout.)
 class CollapseWriter {
  public:
-  // Reserved to their bounds (pages never written are never touched): no regrowth copies.
   CollapseWriter(const FlatBvh& bvh, uint32_t width, bool entries_distinct)
       : bvh_(bvh), entries_distinct_(entries_distinct) {
     out_.width = width;
-    const size_t leaves = (bvh.nodes.size() + 1) / 2;
-    out_.nodes.reserve(leaves);
-    out_.child_begin.reserve(leaves + 1);
-    out_.children.reserve(bvh.nodes.size());
-    out_.child_is_leaf.reserve(bvh.nodes.size());
-    out_.child_index.reserve(bvh.nodes.size());
-    out_.leaf_begin.reserve(leaves + 1);
-    leaf_flat_.reserve(leaves);
   }
 
   // `children_of(flat, out)` appends the flat nodes that become the wide node's children;
@@ -140,45 +133,118 @@ class CollapseWriter {
   // given.
   template <class ChildrenOf, class IsLeaf, class Distinct>
   CollapsedBvh write(ChildrenOf&& children_of, IsLeaf&& is_leaf, Distinct&& distinct, const WideCostModel& cost) {
-    struct Pending {
-      uint32_t flat;
-      uint32_t slot;  // index in out_.child_index to patch with the wide node, kNoSet for the root
-    };
-    std::vector<Pending> todo{{0, kNoSet}};
-    std::vector<uint32_t> kids;
-    while (!todo.empty()) {
-      const Pending p = todo.back();
-      todo.pop_back();
-      const uint32_t w = uint32_t(out_.nodes.size());
-      if (p.slot != kNoSet) out_.child_index[p.slot] = w;
-      out_.nodes.push_back(p.flat);
-      node_area_ += double(bvh_.nodes[p.flat].box.area());
-      kids.clear();
-      if (bvh_.nodes[p.flat].is_leaf())
-        kids.push_back(p.flat);  // a tree that is one leaf
-      else
-        children_of(p.flat, kids);
-      const size_t first_slot = out_.children.size();
-      for (uint32_t c : kids) {
-        const bool leaf = bvh_.nodes[c].is_leaf() || is_leaf(c);
-        out_.children.push_back(c);
-        out_.child_is_leaf.push_back(leaf ? 1 : 0);
-        out_.child_index.push_back(leaf ? add_leaf(c, distinct(c)) : kNoSet);
-      }
-      out_.child_begin.push_back(uint32_t(out_.children.size()));
-      // Reverse, so the first inner child is numbered next (depth-first).
-      for (size_t s = out_.children.size(); s-- > first_slot;)
-        if (!out_.child_is_leaf[s]) todo.push_back({out_.children[s], uint32_t(s)});
-    }
-    out_.sah_cost = normalized_wide_cost(node_area_, block_area_, bvh_, cost);
+    Piece top;
+    std::vector<Pending> inner;  // the root's inner children, each a piece's root
+    walk(0, top, &inner, children_of, is_leaf, distinct);
+    std::vector<Piece> pieces(inner.size());
+    tbb::parallel_for(size_t(0), inner.size(),
+                      [&](size_t k) { walk(inner[k].flat, pieces[k], nullptr, children_of, is_leaf, distinct); });
+    join(top, pieces, inner);
+    // The cost's two sums in wide_sah_cost's order (the same double as one walk's).
+    double node_area = 0.0, block_area = 0.0;
+    for (uint32_t flat : out_.nodes) node_area += double(bvh_.nodes[flat].box.area());
+    for (size_t l = 0; l < leaf_flat_.size(); ++l)
+      block_area += double(bvh_.nodes[leaf_flat_[l]].box.area()) *
+                    double(blocks_for(out_.leaf_begin[l + 1] - out_.leaf_begin[l]));
+    out_.sah_cost = normalized_wide_cost(node_area, block_area, bvh_, cost);
     fill_leaves();
     return std::move(out_);
   }
 
  private:
-  // Sizes the leaf and adds its term of the wide SAH cost, in the order wide_sah_cost adds it
-  // (so the same double, without a second walk over the children's boxes).
-  uint32_t add_leaf(uint32_t flat, uint32_t known) {
+  struct Pending {
+    uint32_t flat;
+    uint32_t slot;  // index in child_index to patch with the wide node, kNoSet for the root
+  };
+  // A subtree's wide nodes, numbered from 0 (its root), children and leaves (their flat
+  // nodes and sizes).
+  struct Piece {
+    std::vector<uint32_t> nodes, child_begin{0}, children, child_index, leaf_begin{0}, leaf_flat;
+    std::vector<uint8_t> child_is_leaf;
+  };
+
+  // Depth-first from flat node `root` into `p`. With `stop`, only the root: its inner children
+  // are left to `stop` instead of walked.
+  template <class ChildrenOf, class IsLeaf, class Distinct>
+  void walk(uint32_t root, Piece& p, std::vector<Pending>* stop, ChildrenOf& children_of, IsLeaf& is_leaf,
+            Distinct& distinct) const {
+    std::vector<Pending> todo{{root, kNoSet}};
+    std::vector<uint32_t> kids, set, scratch;
+    while (!todo.empty()) {
+      const Pending at = todo.back();
+      todo.pop_back();
+      const uint32_t w = uint32_t(p.nodes.size());
+      if (at.slot != kNoSet) p.child_index[at.slot] = w;
+      p.nodes.push_back(at.flat);
+      kids.clear();
+      if (bvh_.nodes[at.flat].is_leaf())
+        kids.push_back(at.flat);  // a tree that is one leaf
+      else
+        children_of(at.flat, kids);
+      const size_t first_slot = p.children.size();
+      for (uint32_t c : kids) {
+        const bool leaf = bvh_.nodes[c].is_leaf() || is_leaf(c);
+        p.children.push_back(c);
+        p.child_is_leaf.push_back(leaf ? 1 : 0);
+        p.child_index.push_back(leaf ? add_leaf(p, c, distinct(c), set, scratch) : kNoSet);
+      }
+      p.child_begin.push_back(uint32_t(p.children.size()));
+      if (stop) {
+        for (size_t s = first_slot; s < p.children.size(); ++s)
+          if (!p.child_is_leaf[s]) stop->push_back({p.children[s], uint32_t(s)});
+        return;
+      }
+      // Reverse, so the first inner child is numbered next (depth-first).
+      for (size_t s = p.children.size(); s-- > first_slot;)
+        if (!p.child_is_leaf[s]) todo.push_back({p.children[s], uint32_t(s)});
+    }
+  }
+
+  // The root's piece, then the others in order, their numbers offset by what comes before.
+  void join(const Piece& top, const std::vector<Piece>& pieces, const std::vector<Pending>& inner) {
+    const size_t n = pieces.size();
+    std::vector<size_t> node_at(n + 1), slot_at(n + 1), leaf_at(n + 1);
+    std::vector<uint32_t> triangle_at(n + 1);
+    node_at[0] = top.nodes.size();
+    slot_at[0] = top.children.size();
+    leaf_at[0] = top.leaf_flat.size();
+    triangle_at[0] = top.leaf_begin.back();
+    for (size_t k = 0; k < n; ++k) {
+      node_at[k + 1] = node_at[k] + pieces[k].nodes.size();
+      slot_at[k + 1] = slot_at[k] + pieces[k].children.size();
+      leaf_at[k + 1] = leaf_at[k] + pieces[k].leaf_flat.size();
+      triangle_at[k + 1] = triangle_at[k] + pieces[k].leaf_begin.back();
+    }
+    out_.nodes.resize(node_at[n]);
+    out_.child_begin.resize(node_at[n] + 1);
+    out_.children.resize(slot_at[n]);
+    out_.child_is_leaf.resize(slot_at[n]);
+    out_.child_index.resize(slot_at[n]);
+    out_.leaf_begin.resize(leaf_at[n] + 1);
+    leaf_flat_.resize(leaf_at[n]);
+    auto place = [&](const Piece& p, size_t node, size_t slot, size_t leaf, uint32_t triangle) {
+      std::copy(p.nodes.begin(), p.nodes.end(), out_.nodes.begin() + node);
+      for (size_t i = 1; i < p.child_begin.size(); ++i) out_.child_begin[node + i] = uint32_t(slot + p.child_begin[i]);
+      std::copy(p.children.begin(), p.children.end(), out_.children.begin() + slot);
+      std::copy(p.child_is_leaf.begin(), p.child_is_leaf.end(), out_.child_is_leaf.begin() + slot);
+      for (size_t i = 0; i < p.child_index.size(); ++i)
+        out_.child_index[slot + i] = p.child_is_leaf[i] ? uint32_t(leaf + p.child_index[i])
+                                     : p.child_index[i] == kNoSet ? kNoSet
+                                                                  : uint32_t(node + p.child_index[i]);
+      for (size_t i = 1; i < p.leaf_begin.size(); ++i) out_.leaf_begin[leaf + i] = triangle + p.leaf_begin[i];
+      std::copy(p.leaf_flat.begin(), p.leaf_flat.end(), leaf_flat_.begin() + leaf);
+    };
+    out_.child_begin[0] = 0;
+    out_.leaf_begin[0] = 0;
+    place(top, 0, 0, 0, 0);
+    tbb::parallel_for(size_t(0), n,
+                      [&](size_t k) { place(pieces[k], node_at[k], slot_at[k], leaf_at[k], triangle_at[k]); });
+    for (size_t k = 0; k < n; ++k) out_.child_index[inner[k].slot] = uint32_t(node_at[k]);
+  }
+
+  // Sizes the leaf.
+  uint32_t add_leaf(Piece& p, uint32_t flat, uint32_t known, std::vector<uint32_t>& set,
+                    std::vector<uint32_t>& scratch) const {
     uint32_t n = known;
     if (n == kSaturated) {
       // Not known (a binary leaf of more entries than the counts keep): counted here. Such a
@@ -186,8 +252,8 @@ class CollapseWriter {
       if (entries_distinct_) {
         n = bvh_.nodes[flat].count;
       } else {
-        distinct_triangles(bvh_, flat, set_, scratch_);
-        n = uint32_t(set_.size());
+        distinct_triangles(bvh_, flat, set, scratch);
+        n = uint32_t(set.size());
       }
     }
     if (n > kWideMaxLeafTriangles)
@@ -195,10 +261,9 @@ class CollapseWriter {
                   std::to_string(kWideMaxLeafTriangles) +
                   " (build with a smaller leaf size, collapse with a leaf limit of at most that: compact or bake "
                   "--max-leaf-size, or trace the binary layout)");
-    block_area_ += double(bvh_.nodes[flat].box.area()) * double(blocks_for(n));
-    out_.leaf_begin.push_back(out_.leaf_begin.back() + n);
-    leaf_flat_.push_back(flat);
-    return uint32_t(out_.leaf_begin.size() - 2);
+    p.leaf_begin.push_back(p.leaf_begin.back() + n);
+    p.leaf_flat.push_back(flat);
+    return uint32_t(p.leaf_begin.size() - 2);
   }
 
   // Each leaf's distinct triangles, ascending, into its range of leaf_triangles.
@@ -245,10 +310,8 @@ class CollapseWriter {
 
   const FlatBvh& bvh_;
   const bool entries_distinct_;
-  std::vector<uint32_t> set_, scratch_;
   std::vector<uint32_t> leaf_flat_;  // per leaf, its flat node
   CollapsedBvh out_;
-  double node_area_ = 0.0, block_area_ = 0.0;  // the wide SAH cost's two sums
 };
 
 // The dynamic program. C(n, i), the least cost of the subtree of n as at most i subtrees
