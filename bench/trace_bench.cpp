@@ -366,9 +366,9 @@ std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mes
         o.isa = isa;
         add(t, "bvh8-" + std::string(isa_name(isa)), o);
       }
-      // Rays traced one after the other and 2 side by side (the default is 4 on scattered
-      // batches; the same on the others).
-      for (uint32_t lanes : {1u, 2u}) {
+      // Rays traced one after the other and 2, 4 or 8 side by side (the default is 16 on
+      // scattered batches; the same on the others).
+      for (uint32_t lanes : {1u, 2u, 4u, 8u}) {
         o = {};
         o.lanes = lanes;
         add(t, "bvh8-lanes" + std::to_string(lanes), o);
