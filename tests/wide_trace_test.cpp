@@ -369,7 +369,6 @@ TEST(WideTrace, RaysTracedSideBySideGiveTheSameHitsAndWork) {
     std::vector<Hit> reference;
     std::vector<uint8_t> reference_any;
     TraceCounters reference_counters;
-    // Every kernel (2, 3, 4, 8 and 16 lanes), and a count that rounds down (5 to 4).
     for (uint32_t lanes : {1u, 2u, 3u, 4u, 5u, 8u, 16u}) {
       WideTracerOptions o;
       o.layout.collapse.width = v.width;

@@ -41,9 +41,8 @@ struct WideTracerOptions {
   std::optional<Isa> isa;  // default: default_isa()
   NearFirst near_first = NearFirst::octant_order;
   // Rays traced side by side on batches of scattered rays (random rays; see the kernel's
-  // trace_interleaved): 0 picks the measured best (16), 1 traces one ray after the other;
-  // other counts round down to 2, 3, 4, 8 or 16, at most kMaxTraceLanes. Hits and counted
-  // work are the same either way.
+  // trace_interleaved): 0 picks the measured best (16), 1 traces one ray after the other,
+  // at most kMaxTraceLanes. Hits and counted work are the same either way.
   uint32_t lanes = 0;
 };
 

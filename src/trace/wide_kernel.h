@@ -132,7 +132,7 @@ inline uint32_t slab_test(const float (*bounds)[W], const KernelRay& r, float li
 struct SlabRay8 {
   __m256 rdir[3], org_rdir[3], far_rdir[3], far_org_rdir[3], tmin;
   uint32_t near_row[3], far_row[3];
-  explicit SlabRay8(const KernelRay& r) {
+  __attribute__((always_inline)) explicit SlabRay8(const KernelRay& r) {
     for (int a = 0; a < 3; ++a) {
       rdir[a] = _mm256_set1_ps(r.rdir[a]);
       org_rdir[a] = _mm256_set1_ps(r.org_rdir[a]);
@@ -277,7 +277,7 @@ inline __attribute__((always_inline)) bool block_moller_trumbore(const TriangleB
 
 // Woop et al.'s watertight test with the operation order of the scalar one in traversal.cpp,
 // including its double-precision recomputation when an edge function is zero.
-inline bool block_watertight(const TriangleBlock& b, const KernelRay& r, BestHit& best) {
+inline __attribute__((always_inline)) bool block_watertight(const TriangleBlock& b, const KernelRay& r, BestHit& best) {
   const __m128 okx = _mm_set1_ps(r.org[r.kx]), oky = _mm_set1_ps(r.org[r.ky]), okz = _mm_set1_ps(r.org[r.kz]);
   const __m128 ax = _mm_sub_ps(_mm_load_ps(b.p[r.kx]), okx), ay = _mm_sub_ps(_mm_load_ps(b.p[r.ky]), oky);
   const __m128 az = _mm_sub_ps(_mm_load_ps(b.p[r.kz]), okz);
@@ -598,7 +598,10 @@ done:
 // the next node of every lane asked for as soon as it is known, K fetches are in flight at
 // once. Every ray visits the same nodes in the same order as alone, so hits and counted work
 // are those of traverse.
-template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kAny, bool kCompact, uint32_t K>
+// The lane count is a run-time loop bound, not a template argument: unrolled for 8 and 16
+// lanes, the side-by-side kernels grew the translation unit enough to cost the one-ray
+// kernels 2-3 % (AO rays, armadillo) through code placement.
+template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kAny, bool kCompact>
 void trace_interleaved(const Batch& b) {
   struct Lane {
     KernelRay r;
@@ -608,7 +611,8 @@ void trace_interleaved(const Batch& b) {
     size_t ray;
     bool found;
   };
-  Lane lanes[K];
+  const uint32_t K = b.lanes < kMaxLanes ? b.lanes : kMaxLanes;
+  Lane lanes[kMaxLanes];
   uint32_t steps = 0, tests = 0;
   size_t next_ray = 0;
   // Puts the next ray of the batch in a lane; false when none is left.
@@ -678,21 +682,11 @@ void trace_range(const Batch& b, size_t begin, size_t end) {
   }
 }
 
-// More lanes, more fetches in flight: against 4 lanes, 16 traced random rays 1-5 % faster
-// (bvh8, 1 thread: bunny, beast, Sponza, armadillo, ogre, Conference; staircase and
-// classroom level), 8 lanes about half of that.
+// More lanes, more fetches in flight: against 4 lanes, 16 traced random rays 2-5 % faster
+// (bvh8, 1 thread: bunny, ogre, staircase, Sponza, Conference; classroom level).
 template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kCompact, bool kAny>
 void trace_lanes(const Batch& b) {
-  if (b.lanes >= 16)
-    trace_interleaved<W, kTest, kOrder, kAny, kCompact, 16>(b);
-  else if (b.lanes >= 8)
-    trace_interleaved<W, kTest, kOrder, kAny, kCompact, 8>(b);
-  else if (b.lanes >= 4)
-    trace_interleaved<W, kTest, kOrder, kAny, kCompact, 4>(b);
-  else if (b.lanes == 3)
-    trace_interleaved<W, kTest, kOrder, kAny, kCompact, 3>(b);
-  else
-    trace_interleaved<W, kTest, kOrder, kAny, kCompact, 2>(b);
+  trace_interleaved<W, kTest, kOrder, kAny, kCompact>(b);
 }
 
 // Rays of a scattered batch that take only a few steps each gain nothing from being traced

@@ -13,6 +13,9 @@
 namespace bvhopt::wide_kernels {
 
 // One batch of rays through one layout. Exactly one of hits / any_hits is set.
+// The most rays a kernel traces side by side (WideTracer's kMaxTraceLanes).
+constexpr uint32_t kMaxLanes = 16;
+
 struct Batch {
   const std::byte* arena;
   uint32_t root;
@@ -27,7 +30,7 @@ struct Batch {
   uint32_t* stack_words;
   float* stack_t;
   size_t stack_stride;  // entries per lane: lane k's stack starts at entry k * stack_stride
-  // Rays traced side by side (1: one after the other; at most kMaxTraceLanes). More than one
+  // Rays traced side by side (1: one after the other; at most kMaxLanes). More than one
   // only where ray after ray starts in a different part of the scene (random rays; not
   // camera, ambient occlusion or shadow rays): each then reads nodes the last one did not,
   // and their fetches can overlap.

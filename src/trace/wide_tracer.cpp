@@ -23,8 +23,11 @@ KernelFn kernel_for(Isa isa) {
   return wide_kernels::trace_sse42;
 }
 
-// Most traversals fit a stack on the C stack; deeper trees get one on the heap.
-constexpr uint32_t kFixedStack = 512;
+// The lanes' stacks fit on the C stack for most trees (each lane's the tree's stack need,
+// rounded up to whole cache lines); deeper trees or more lanes get them on the heap. (Sized
+// for every lane at 512 entries, the frame was 64 KiB with 16 lanes.)
+constexpr uint32_t kFixedEntries = 2048;
+static_assert(kMaxTraceLanes == wide_kernels::kMaxLanes);
 
 }  // namespace
 
@@ -95,20 +98,19 @@ namespace {
 template <class Fill>
 void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, uint32_t lanes, float scatter_distance,
                 TraceCounters& counters, Fill&& fill) {
-  alignas(32) uint32_t fixed_words[kMaxTraceLanes * kFixedStack];
-  alignas(32) float fixed_t[kMaxTraceLanes * kFixedStack];
+  alignas(64) uint32_t fixed_words[kFixedEntries];
+  alignas(64) float fixed_t[kFixedEntries];
   std::vector<uint32_t> heap_words;
   std::vector<float> heap_t;
   wide_kernels::Batch b{};
   b.stack_words = fixed_words;
   b.stack_t = fixed_t;
-  b.stack_stride = kFixedStack;
-  if (bvh.stack_entries() > kFixedStack) {
-    heap_words.resize(size_t(lanes) * bvh.stack_entries());
-    heap_t.resize(size_t(lanes) * bvh.stack_entries());
+  b.stack_stride = (bvh.stack_entries() + 15) / 16 * 16;
+  if (size_t(lanes) * b.stack_stride > kFixedEntries) {
+    heap_words.resize(size_t(lanes) * b.stack_stride);
+    heap_t.resize(size_t(lanes) * b.stack_stride);
     b.stack_words = heap_words.data();
     b.stack_t = heap_t.data();
-    b.stack_stride = bvh.stack_entries();
   }
   b.arena = bvh.data();
   b.root = bvh.root();
