@@ -12,10 +12,10 @@
 
 namespace bvhopt::wide_kernels {
 
-// One batch of rays through one layout. Exactly one of hits / any_hits is set.
 // The most rays a kernel traces side by side (WideTracer's kMaxTraceLanes).
 constexpr uint32_t kMaxLanes = 16;
 
+// One batch of rays through one layout. Exactly one of hits / any_hits is set.
 struct Batch {
   const std::byte* arena;
   uint32_t root;
