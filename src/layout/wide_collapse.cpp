@@ -116,10 +116,10 @@ double normalized_wide_cost(double nodes, double blocks, const FlatBvh& bvh, con
 // Builds the output structure from a function giving each wide node's children. Wide nodes
 // are numbered depth-first. The subtrees under the root's inner children are walked in
 // parallel, each numbered from 0 in a piece of its own, and the pieces are then put one after
-// the other: the same numbering as one walk. Each leaf is sized from
-// `distinct(flat)` (its distinct triangles, when known) and the leaves' triangles are filled in
-// last, in parallel. (On 2 threads the one sequential walk that did all of it was the largest
-// part of collapse + layout.)
+// the other: the same numbering as one walk. Each leaf is sized from `distinct(flat)` (its
+// distinct triangles, when known) and the leaves' triangles are filled in last, in parallel.
+// (On 2 threads the one sequential walk that did all of it was the largest part of collapse
+// + layout.)
 class CollapseWriter {
  public:
   CollapseWriter(const FlatBvh& bvh, uint32_t width, bool entries_distinct)

@@ -126,9 +126,9 @@ inline uint32_t slab_test(const float (*bounds)[W], const KernelRay& r, float li
 // scalars at every node instead, they cost a dozen shuffles a node on the port that the
 // child ordering needs too (with the folded exit scaling, against neither, 1 thread:
 // armadillo +2 % on primary, random and AO rays; Conference primary +0.2 %, random +1.8 %,
-// AO +1.2 %). traverse keeps these
-// in registers; the side-by-side kernel, whose four lanes' worth would not fit, broadcasts
-// per node (see slab_operands).
+// AO +1.2 %). traverse keeps these in registers; the side-by-side kernel, whose lanes' worth
+// would not fit, broadcasts per node (see slab_operands; kept per lane in memory instead,
+// they made random rays 3.5 % slower on armadillo).
 struct SlabRay8 {
   __m256 rdir[3], org_rdir[3], far_rdir[3], far_org_rdir[3], tmin;
   uint32_t near_row[3], far_row[3];
@@ -502,7 +502,6 @@ inline __attribute__((always_inline)) auto slab_operands(const KernelRay& r) {
 
 // One inner node: pushes the entered children but the nearest, which it returns (kNoWord
 // when the ray enters none). `slab`: r's slab_operands, or r itself.
-
 template <uint32_t W, NearFirst kOrder, bool kCompact, class Slab>
 inline __attribute__((always_inline)) uint32_t visit_node(const std::byte* arena, uint32_t word, const KernelRay& r,
                                                           const Slab& slab, float limit, Stack& stack) {
@@ -640,8 +639,7 @@ void trace_interleaved(const Batch& b) {
       ++steps;
       uint32_t next;
       if (!(l.word & kWideLeafFlag)) {
-        // The ray's own scalars, broadcast per node: four lanes' SlabRay8 kept in memory instead
-        // made random rays 3.5 % slower (armadillo).
+        // The ray's own scalars, broadcast per node (see SlabRay8).
         next = visit_node<W, kOrder, kCompact>(b.arena, l.word, l.r, l.r, l.best.t, l.stack);
         if (next == kNoWord) next = pop_next(l.stack, l.best.t);
       } else {
