@@ -275,6 +275,62 @@ inline __attribute__((always_inline)) bool block_moller_trumbore(const TriangleB
   return mask != 0 && offer_lanes(mask, t, _mm_mul_ps(uu, ainv), _mm_mul_ps(vv, ainv), b.id, best);
 }
 
+#if defined(__AVX2__)
+// The same test on two blocks at once (blocks b and b + 1), lane for lane the same operations
+// as block_moller_trumbore, so hits are bit-identical; both blocks are judged against the best
+// distance before either, which offer() re-checks.
+inline __attribute__((always_inline)) bool block_pair_moller_trumbore(const TriangleBlock* b, const KernelRay& r,
+                                                                      BestHit& best) {
+  const auto row = [&](int k) {
+    return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(b[0].p[k])), _mm_load_ps(b[1].p[k]), 1);
+  };
+  const __m256 dx = _mm256_set1_ps(r.dir[0]), dy = _mm256_set1_ps(r.dir[1]), dz = _mm256_set1_ps(r.dir[2]);
+  const __m256 e1x = row(3), e1y = row(4), e1z = row(5);
+  const __m256 e2x = row(6), e2y = row(7), e2z = row(8);
+  const __m256 px = _mm256_sub_ps(_mm256_mul_ps(dy, e2z), _mm256_mul_ps(dz, e2y));
+  const __m256 py = _mm256_sub_ps(_mm256_mul_ps(dz, e2x), _mm256_mul_ps(dx, e2z));
+  const __m256 pz = _mm256_sub_ps(_mm256_mul_ps(dx, e2y), _mm256_mul_ps(dy, e2x));
+  const __m256 det =
+      _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(e1x, px), _mm256_mul_ps(e1y, py)), _mm256_mul_ps(e1z, pz));
+  const __m256 tx = _mm256_sub_ps(_mm256_set1_ps(r.org[0]), row(0));
+  const __m256 ty = _mm256_sub_ps(_mm256_set1_ps(r.org[1]), row(1));
+  const __m256 tz = _mm256_sub_ps(_mm256_set1_ps(r.org[2]), row(2));
+  const __m256 sign = _mm256_and_ps(det, _mm256_set1_ps(-0.0f));
+  const __m256 adet = _mm256_xor_ps(det, sign);
+  const __m256 uu = _mm256_xor_ps(
+      _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(tx, px), _mm256_mul_ps(ty, py)), _mm256_mul_ps(tz, pz)), sign);
+  const __m256 qx = _mm256_sub_ps(_mm256_mul_ps(ty, e1z), _mm256_mul_ps(tz, e1y));
+  const __m256 qy = _mm256_sub_ps(_mm256_mul_ps(tz, e1x), _mm256_mul_ps(tx, e1z));
+  const __m256 qz = _mm256_sub_ps(_mm256_mul_ps(tx, e1y), _mm256_mul_ps(ty, e1x));
+  const __m256 vv = _mm256_xor_ps(
+      _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, qx), _mm256_mul_ps(dy, qy)), _mm256_mul_ps(dz, qz)), sign);
+  const __m256 zero = _mm256_setzero_ps();
+  __m256 ok = _mm256_and_ps(_mm256_cmp_ps(det, zero, _CMP_NEQ_UQ), _mm256_cmp_ps(uu, zero, _CMP_GE_OS));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(vv, zero, _CMP_GE_OS));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(_mm256_add_ps(uu, vv), adet, _CMP_LE_OS));
+  if (_mm256_movemask_ps(ok) == 0) return false;
+  const __m256 inv = _mm256_xor_ps(_mm256_div_ps(_mm256_set1_ps(1.0f), adet), sign);
+  const __m256 ts = _mm256_add_ps(
+      _mm256_add_ps(_mm256_mul_ps(e2x, _mm256_mul_ps(qx, inv)), _mm256_mul_ps(e2y, _mm256_mul_ps(qy, inv))),
+      _mm256_mul_ps(e2z, _mm256_mul_ps(qz, inv)));
+  const __m256 t = _mm256_mul_ps(ts, _mm256_set1_ps(r.t_scale));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(t, _mm256_set1_ps(r.tmin), _CMP_GE_OS));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(t, _mm256_set1_ps(best.t), _CMP_LE_OS));
+  const uint32_t mask = uint32_t(_mm256_movemask_ps(ok));
+  if (mask == 0) return false;
+  const __m256 ainv = _mm256_xor_ps(inv, sign);
+  const __m256 u = _mm256_mul_ps(uu, ainv), v = _mm256_mul_ps(vv, ainv);
+  bool any = false;
+  if (mask & 15u)
+    any |= offer_lanes(mask & 15u, _mm256_castps256_ps128(t), _mm256_castps256_ps128(u), _mm256_castps256_ps128(v),
+                       b[0].id, best);
+  if (mask >> 4)
+    any |= offer_lanes(mask >> 4, _mm256_extractf128_ps(t, 1), _mm256_extractf128_ps(u, 1),
+                       _mm256_extractf128_ps(v, 1), b[1].id, best);
+  return any;
+}
+#endif
+
 // Woop et al.'s watertight test with the operation order of the scalar one in traversal.cpp,
 // including its double-precision recomputation when an edge function is zero.
 inline __attribute__((always_inline)) bool block_watertight(const TriangleBlock& b, const KernelRay& r, BestHit& best) {
@@ -472,14 +528,19 @@ inline __attribute__((always_inline)) uint32_t order_children(const typename Wid
 }
 
 // The blocks of one leaf; whether any gave a closer hit (any hit at all, for any-hit).
-template <TriangleTest kTest>
+template <TriangleTest kTest, bool kPairs = false>
 inline __attribute__((always_inline)) bool test_leaf(const std::byte* arena, uint32_t word, const KernelRay& r,
                                                      BestHit& best, uint32_t& tests) {
   const TriangleBlock* blocks = at_unit<TriangleBlock>(arena, word);
   const uint32_t count = ((word >> 27) & 15u) + 1;
   tests += 4 * count;
   bool found = false;
-  for (uint32_t i = 0; i < count; ++i)
+  uint32_t i = 0;
+#if defined(__AVX2__)
+  if constexpr (kPairs && kTest == TriangleTest::moller_trumbore)
+    for (; i + 1 < count; i += 2) found |= block_pair_moller_trumbore(blocks + i, r, best);
+#endif
+  for (; i < count; ++i)
     found |= kTest == TriangleTest::watertight ? block_watertight(blocks[i], r, best)
                                                : block_moller_trumbore(blocks[i], r, best);
   return found;
@@ -568,7 +629,7 @@ inline __attribute__((always_inline)) bool traverse(const Batch& batch, const Ra
       // The stack top is what comes after this leaf unless the leaf hits nearer: its fetch
       // overlaps the triangle tests.
       if (stack.size != 0) prefetch_unit(arena, stack.words[stack.size - 1]);
-      const bool hit = test_leaf<kTest>(arena, word, r, best, tests);
+      const bool hit = test_leaf<kTest, kCompact>(arena, word, r, best, tests);
       found |= hit;
       if (kAny && hit) goto done;
     }
