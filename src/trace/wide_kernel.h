@@ -146,7 +146,9 @@ struct SlabRay8 {
 };
 
 inline __m256 row8(const float (*b)[8], uint32_t row) { return _mm256_load_ps(b[row]); }
-inline __attribute__((always_inline)) uint32_t slab_test(const float (*b)[8], const SlabRay8& s, float limit,
+// With the exit limit scaled and broadcast by the caller, once per closer hit: per node, the
+// multiply and broadcast sat on the shuffle port the child ordering needs.
+inline __attribute__((always_inline)) uint32_t slab_test(const float (*b)[8], const SlabRay8& s, __m256 far_limit,
                                                          float* tnear) {
   const __m256 nx = _mm256_fmsub_ps(row8(b, s.near_row[0]), s.rdir[0], s.org_rdir[0]);
   const __m256 ny = _mm256_fmsub_ps(row8(b, s.near_row[1]), s.rdir[1], s.org_rdir[1]);
@@ -155,7 +157,7 @@ inline __attribute__((always_inline)) uint32_t slab_test(const float (*b)[8], co
   const __m256 fy = _mm256_fmsub_ps(row8(b, s.far_row[1]), s.far_rdir[1], s.far_org_rdir[1]);
   const __m256 fz = _mm256_fmsub_ps(row8(b, s.far_row[2]), s.far_rdir[2], s.far_org_rdir[2]);
   const __m256 tn = _mm256_max_ps(_mm256_max_ps(nx, ny), _mm256_max_ps(nz, s.tmin));
-  const __m256 tf = _mm256_min_ps(_mm256_min_ps(fx, fy), _mm256_min_ps(fz, _mm256_set1_ps(limit * kExitScale)));
+  const __m256 tf = _mm256_min_ps(_mm256_min_ps(fx, fy), _mm256_min_ps(fz, far_limit));
   _mm256_store_ps(tnear, tn);
 #if defined(__AVX512VL__)
   return uint32_t(_mm256_cmp_ps_mask(tn, tf, _CMP_LE_OQ));
@@ -163,12 +165,27 @@ inline __attribute__((always_inline)) uint32_t slab_test(const float (*b)[8], co
   return uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(tn, tf, _CMP_LE_OQ)));
 #endif
 }
+inline __attribute__((always_inline)) uint32_t slab_test(const float (*b)[8], const SlabRay8& s, float limit,
+                                                         float* tnear) {
+  return slab_test(b, s, _mm256_set1_ps(limit * kExitScale), tnear);
+}
 template <>
 inline __attribute__((always_inline)) uint32_t slab_test<8>(const float (*b)[8], const KernelRay& r, float limit,
                                                             float* tnear) {
   return slab_test(b, SlabRay8(r), limit, tnear);
 }
 #endif
+
+// The exit limit visit_node hands the slab test for the closest hit so far at distance t:
+// t itself, or for bvh8 with AVX2 or AVX-512, t scaled and broadcast.
+template <uint32_t W>
+inline __attribute__((always_inline)) auto node_limit(float t) {
+#if defined(__AVX2__)
+  if constexpr (W == 8) return _mm256_set1_ps(t * kExitScale);
+  else
+#endif
+    return t;
+}
 
 // Four lanes starting at column `col` of a W-wide node.
 template <uint32_t W>
@@ -563,9 +580,9 @@ inline __attribute__((always_inline)) auto slab_operands(const KernelRay& r) {
 
 // One inner node: pushes the entered children but the nearest, which it returns (kNoWord
 // when the ray enters none). `slab`: r's slab_operands, or r itself.
-template <uint32_t W, NearFirst kOrder, bool kCompact, class Slab>
+template <uint32_t W, NearFirst kOrder, bool kCompact, class Slab, class Limit>
 inline __attribute__((always_inline)) uint32_t visit_node(const std::byte* arena, uint32_t word, const KernelRay& r,
-                                                          const Slab& slab, float limit, Stack& stack) {
+                                                          const Slab& slab, Limit limit, Stack& stack) {
   using Node = typename WideNode<W>::Node;
   const Node& n = *at_unit<Node>(arena, word);
   // The layout puts a node's leaf blocks right after it, then its first inner child:
@@ -616,13 +633,14 @@ inline __attribute__((always_inline)) bool traverse(const Batch& batch, const Ra
   const auto slab = slab_operands<W>(r);
   BestHit best;
   best.t = initial_limit(ray);
+  auto limit = node_limit<W>(best.t);
   uint32_t steps = 0, tests = 0;
   bool found = false;
   uint32_t word = batch.root;
   for (;;) {
     while (!(word & kWideLeafFlag)) {
       ++steps;
-      word = visit_node<W, kOrder, kCompact>(arena, word, r, slab, best.t, stack);
+      word = visit_node<W, kOrder, kCompact>(arena, word, r, slab, limit, stack);
     }
     if (word != kNoWord) {
       ++steps;
@@ -632,6 +650,7 @@ inline __attribute__((always_inline)) bool traverse(const Batch& batch, const Ra
       const bool hit = test_leaf<kTest, kCompact>(arena, word, r, best, tests);
       found |= hit;
       if (kAny && hit) goto done;
+      if (hit) limit = node_limit<W>(best.t);
     }
     // pop_next written out: with its kNoWord and a test of it here, AO rays ran 2 % slower
     // and classroom's random rays 5 %.
