@@ -562,6 +562,9 @@ inline __attribute__((always_inline)) uint32_t order_children(const typename Wid
 }
 
 // The blocks of one leaf; whether any gave a closer hit (any hit at all, for any-hit).
+// kPairs: Moller-Trumbore blocks two at a time, where it pays: single rays of incoherent
+// batches (AO +1 to 3 %); in the coherent walk it cost camera rays 1-2 %, in the side-by-side
+// kernel random rays 2-3 %.
 template <TriangleTest kTest, bool kPairs = false>
 inline __attribute__((always_inline)) bool test_leaf(const std::byte* arena, uint32_t word, const KernelRay& r,
                                                      BestHit& best, uint32_t& tests) {
