@@ -420,6 +420,30 @@ TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreads) {
   }
 }
 
+// A node array of several megabytes, whose whole huge pages the optimizer has collapsed
+// on a thread of its own while the passes run (where the kernel offers it): the tree and
+// every pass's cost stay those of one thread, and the tree stays valid.
+TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreadsOnALargeArray) {
+  PrimitiveRefs refs = testing::random_refs(80000, 13);
+  std::string sig[2];
+  std::vector<double> trace[2];
+  for (int t = 0; t < 2; ++t) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, t + 1);
+    Bvh bvh = build_sweep_sah(refs);
+    ASSERT_GT(bvh.nodes.size() * sizeof(BvhNode), size_t(4) << 20);
+    InsertionConfig cfg;
+    cfg.seed = 5;
+    cfg.limits.max_passes = 6;
+    OptimizeReport r = optimize_insertion(bvh, cfg);
+    ASSERT_TRUE(validate(bvh, refs).ok());
+    EXPECT_LT(r.final_cost, r.initial_cost);
+    for (const PassRecord& p : r.trace) trace[t].push_back(p.cost);
+    sig[t] = testing::tree_signature(bvh, refs);
+  }
+  EXPECT_EQ(trace[0], trace[1]);
+  EXPECT_EQ(sig[0], sig[1]);
+}
+
 TEST(InsertionOptimizer, SameSeedSameTreeSequential) {
   PrimitiveRefs refs = testing::random_refs(2000, 12);
   std::string sig[2];

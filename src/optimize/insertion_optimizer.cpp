@@ -13,6 +13,7 @@
 #include "bvhopt/random_stream.h"
 #include "bvhopt/testing/insertion_hooks.h"
 #include "optimize/find_by_name.h"
+#include "optimize/huge_page_backing.h"
 #include "optimize/largest_keys.h"
 #include "optimize/pass_driver.h"
 #include "optimize/reinsertion_search.h"
@@ -462,11 +463,14 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
       return driver.finish();
     }
   }
-  for (bool parallel : stages_of(config.form)) {
-    // Each stage starts afresh from the tree the last one left (its tracked sums included).
-    InsertionOptimizer stage(bvh, config, parallel, after_move);
-    driver.run(stage);
-    if (driver.stop_reason() != StopReason::converged) break;
+  {
+    const detail::HugePageBacking huge_pages(bvh.nodes);
+    for (bool parallel : stages_of(config.form)) {
+      // Each stage starts afresh from the tree the last one left (its tracked sums included).
+      InsertionOptimizer stage(bvh, config, parallel, after_move);
+      driver.run(stage);
+      if (driver.stop_reason() != StopReason::converged) break;
+    }
   }
   bvh.renumber_depth_first();
   return driver.finish();
