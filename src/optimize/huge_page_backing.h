@@ -3,8 +3,8 @@
 // The optimizers' searches visit nodes all over the array, and with 4 KiB pages most of
 // those visits also miss the TLB: insertion at 1M triangles took 9-11 % less time with the
 // array on 2 MiB pages. Asking for them when the array is allocated made the builds here
-// up to a quarter slower on some runs (the first touch of fresh huge pages in this VM), a
-// cost every build would pay, optimized or not. So the optimizer has the pages it already
+// 15-30 % slower in about half the runs (the first touch of fresh huge pages in this VM), a
+// cost any build could pay, optimized or not. So the optimizer has the pages it already
 // has collapsed into huge ones (MADV_COLLAPSE, Linux 6.1 and later) on a thread of its own,
 // a few megabytes at a time, while the passes run: the sequential passes leave a core idle,
 // and a short run is not held up (the thread stops after the chunk it is on). The thread is
