@@ -98,7 +98,8 @@ void add_method_options(CLI::App* cmd, OptimizeOptions& opt) {
       ->check(CLI::IsMember(measures))
       ->capture_default_str();
   cmd->add_option("--form", opt.form,
-                  "insertion: sequential (the paper's) | parallel (deterministic) | hybrid (the first, then the second)")
+                  "insertion: sequential (the paper's) | parallel (deterministic) | hybrid (the first, then the second; "
+                  "regional from 1M nodes) | regional (the paper's passes on all threads, in disjoint subtrees)")
       ->check(CLI::IsMember(names_of(insertion_forms(), form_name)))
       ->capture_default_str();
   cmd->add_option("--random-after", opt.insertion.random_after,

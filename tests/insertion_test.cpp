@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <bit>
@@ -203,6 +204,56 @@ TEST(InsertionSearch, SearchFromAnyStartEqualsBruteForce) {
   EXPECT_GT(start_kept, 10);
 }
 
+// The regional passes' search: only inside the subtree of a region's root, the root itself
+// excluded, for a box that came from that subtree. It must find the exhaustive minimum over
+// those places, from any start inside, with costs that are the whole tree's placement costs
+// (nothing above the root grows).
+TEST(InsertionSearch, SearchInsideASubtreeEqualsBruteForceThere) {
+  std::mt19937_64 rng(5151);
+  std::vector<detail::SearchEntry> heap;
+  std::vector<uint32_t> path;
+  int checked = 0;
+  for (uint32_t trial = 0; trial < 2000; ++trial) {
+    const uint32_t count = 4 + static_cast<uint32_t>(rng() % 150);
+    PrimitiveRefs refs = testing::random_refs(count, 70000 + trial);
+    Bvh bvh = build_start(refs, static_cast<int>(trial));
+    std::vector<uint32_t> roots;
+    for (uint32_t n : bvh.depth_first_order())
+      if (!bvh[n].is_leaf()) roots.push_back(n);
+    const uint32_t root = roots[rng() % roots.size()];
+    std::vector<uint32_t> inside;  // the subtree without its root
+    for (std::vector<uint32_t> stack{bvh[root].left(), bvh[root].right()}; !stack.empty();) {
+      const uint32_t v = stack.back();
+      stack.pop_back();
+      inside.push_back(v);
+      if (!bvh[v].is_leaf()) stack.insert(stack.end(), {bvh[v].left(), bvh[v].right()});
+    }
+    // A box from inside: one of the subtree's nodes, or a random part of the root's box.
+    Box box = bvh[inside[rng() % inside.size()]].box;
+    if (trial % 3 == 0) {
+      const Box& r = bvh[root].box;
+      std::uniform_real_distribution<float> u(0.0f, 1.0f);
+      Vec3 a, b;
+      for (int k = 0; k < 3; ++k) {
+        const float lo = r.min[k], hi = r.max[k], s = u(rng), t = u(rng);
+        a[k] = lo + std::min(s, t) * (hi - lo);
+        b[k] = std::min(hi, lo + std::max(s, t) * (hi - lo));
+      }
+      box = Box(a, b);
+    }
+    const uint32_t start = inside[rng() % inside.size()];
+    const ReinsertionCandidate seed{start, detail::placement_cost_near(bvh, box, start, path)};
+    const ReinsertionCandidate fast = detail::search_reinsertion(bvh, box, kInvalidNode, root, heap, seed, root);
+    double best = std::numeric_limits<double>::infinity();
+    for (uint32_t x : inside) best = std::min(best, detail::placement_cost(bvh, box, x, path));
+    ASSERT_EQ(fast.cost, best) << "trial " << trial;
+    ASSERT_NE(std::find(inside.begin(), inside.end(), fast.node), inside.end()) << "trial " << trial;
+    ASSERT_EQ(detail::placement_cost(bvh, box, fast.node, path), fast.cost) << "trial " << trial;
+    ++checked;
+  }
+  EXPECT_EQ(checked, 2000);
+}
+
 // The undo log gives back exactly the tree of its restore point, whatever was changed after.
 TEST(UndoLog, RestoresTheExactTree) {
   std::mt19937_64 rng(31);
@@ -230,6 +281,43 @@ TEST(UndoLog, RestoresTheExactTree) {
     EXPECT_EQ(log.size(), 1u);
     log.begin(bvh, sum);
     EXPECT_EQ(log.size(), 0u);
+  }
+}
+
+// Lanes (the regional passes' records, saved by several threads at once into shares of the
+// log's room) gather into the log: each node once, whichever lane or the log itself saved it
+// first, also past a lane's share; a restore then gives back exactly the old tree.
+TEST(UndoLog, LanesGatherIntoTheLogAndRestoreTheExactTree) {
+  PrimitiveRefs refs = testing::random_refs(400, 6);
+  Bvh bvh = build_sweep_sah(refs);
+  const Bvh before = bvh;
+  const uint32_t node_count = static_cast<uint32_t>(bvh.nodes.size());
+  for (size_t room : {size_t{0}, size_t{40}, size_t{4000}}) {
+    detail::UndoLog log;
+    log.reserve(room);
+    double sum = 2.5;
+    log.begin(bvh, sum);
+    for (uint32_t n = 0; n < 10; ++n) log.save(bvh, n);  // the log's own records
+    // Four lanes, lane j taking the ids equal to j mod 4: neighbours in every word of the
+    // marks belong to different threads. Lane 3 has no weight (no share: all overflow).
+    std::vector<detail::UndoLog::Lane> lanes;
+    log.open_lanes({5, 1, 2, 0}, lanes);
+    tbb::parallel_for(0, 4, [&](int j) {
+      for (uint32_t n = static_cast<uint32_t>(j); n < node_count; n += 4) {
+        log.save(bvh, n, lanes[j]);
+        log.save(bvh, n, lanes[j]);  // twice: still one record
+        bvh[n].parent = ~n;
+        bvh[n].set_box(Box(Vec3(0.0f), Vec3(static_cast<float>(n))));
+      }
+    });
+    log.close_lanes(lanes);
+    ASSERT_EQ(log.size(), node_count) << "room " << room;
+    bvh.root = 3;
+    sum = -1.0;
+    log.restore(bvh, sum);
+    ASSERT_EQ(sum, 2.5);
+    ASSERT_EQ(bvh.root, before.root);
+    ASSERT_EQ(0, std::memcmp(bvh.nodes.data(), before.nodes.data(), bvh.nodes.size() * sizeof(BvhNode))) << room;
   }
 }
 
@@ -295,6 +383,9 @@ void check_every_move(InsertionForm form, InsertionMeasure measure) {
   cfg.measure = measure;
   cfg.batch = 0.05;
   cfg.limits.max_passes = 30;
+  // The regional form's first two stages end at their first pass without a gain, so that
+  // most of the 30 passes are regional.
+  if (form == InsertionForm::regional) cfg.random_after = 1;
   uint64_t checked = 0;
   auto after_move = [&](const Bvh& t, double tracked) {
     ValidationReport v = validate(t, refs);
@@ -318,6 +409,9 @@ TEST(InsertionOptimizer, ValidAndCostTrackedAfterEveryMoveParallel) {
 }
 TEST(InsertionOptimizer, ValidAndCostTrackedAfterEveryMoveHybrid) {
   check_every_move(InsertionForm::hybrid, InsertionMeasure::area);
+}
+TEST(InsertionOptimizer, ValidAndCostTrackedAfterEveryMoveRegional) {
+  check_every_move(InsertionForm::regional, InsertionMeasure::area);
 }
 TEST(InsertionOptimizer, ValidWithEveryMeasure) {
   for (InsertionMeasure m : {InsertionMeasure::sum, InsertionMeasure::min, InsertionMeasure::comb}) {
@@ -346,7 +440,8 @@ TEST(InsertionOptimizer, ParallelFormNeverRaisesTheCost) {
 // than the optimum (which would mean a wrong cost), reaches it in most cases and stays
 // close on average.
 TEST(InsertionOptimizer, CloseToTheExactOptimumOnSmallInputs) {
-  for (InsertionForm form : {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid}) {
+  for (InsertionForm form :
+       {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid, InsertionForm::regional}) {
     int cases = 0, optimal = 0;
     double gap_sum = 0.0, worst = 0.0;
     for (uint32_t seed = 0; seed < 300; ++seed) {
@@ -391,7 +486,7 @@ TEST(InsertionOptimizer, CloseToTheExactOptimumOnSmallInputs) {
 
 TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreads) {
   PrimitiveRefs refs = testing::random_refs(6000, 11);
-  for (InsertionForm form : {InsertionForm::parallel, InsertionForm::hybrid}) {
+  for (InsertionForm form : {InsertionForm::parallel, InsertionForm::hybrid, InsertionForm::regional}) {
     std::string sig[2];
     double cost[2];
     uint32_t passes[2];
@@ -463,7 +558,8 @@ TEST(InsertionOptimizer, SameSeedSameTreeSequential) {
 // oscillates; the pass limit must still end the run.
 TEST(InsertionOptimizer, PassLimitEndsAnOscillatingRun) {
   PrimitiveRefs refs = testing::random_refs(500, 13);
-  for (InsertionForm form : {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid}) {
+  for (InsertionForm form :
+       {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid, InsertionForm::regional}) {
     Bvh bvh = build_sweep_sah(refs);
     InsertionConfig cfg;
     cfg.form = form;
@@ -525,8 +621,8 @@ TEST(InsertionOptimizer, MeasureNames) {
   for (InsertionMeasure m : {InsertionMeasure::area, InsertionMeasure::sum, InsertionMeasure::min, InsertionMeasure::comb})
     EXPECT_EQ(parse_measure(measure_name(m)), m);
   EXPECT_FALSE(parse_measure("volume").has_value());
-  for (InsertionForm f : {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid})
-    EXPECT_EQ(parse_form(form_name(f)), f);
+  for (InsertionForm f : insertion_forms()) EXPECT_EQ(parse_form(form_name(f)), f);
+  EXPECT_EQ(insertion_forms().size(), 4u);
   EXPECT_FALSE(parse_form("greedy").has_value());
 }
 

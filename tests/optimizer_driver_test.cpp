@@ -43,7 +43,8 @@ InsertionConfig insertion_of(InsertionForm form) {
   return cfg;
 }
 
-const InsertionForm kForms[] = {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid};
+const InsertionForm kForms[] = {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid,
+                                InsertionForm::regional};
 
 // The rotations work on a copy of the tree, so the tree after pass k is only seen by running
 // k passes: each run's last record must be the cost of the tree it returns (keep_best off, so

@@ -34,7 +34,7 @@ struct Box {
   // about 1.3e19 and underflows for extents below about 1e-19, and in double scaling the
   // box by 2^k scales its area by exactly 4^k, so trees and costs do not depend on the
   // scene's scale. An empty box has area 0, never a negative value.
-  double area() const {
+  [[gnu::always_inline]] double area() const {
     if (is_empty()) return 0.0;
     return area_unchecked();
   }
@@ -64,7 +64,7 @@ struct Box {
   constexpr bool operator==(const Box& o) const = default;
 };
 
-inline Box merge(const Box& a, const Box& b) {
+[[gnu::always_inline]] inline Box merge(const Box& a, const Box& b) {
   return Box(bvhopt::min(a.min, b.min), bvhopt::max(a.max, b.max));
 }
 

@@ -3,6 +3,7 @@
 // bound search over the whole tree.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string_view>
@@ -48,12 +49,28 @@ enum class InsertionForm {
   // The sequential form until it stops, then the parallel form from its best tree: the fast
   // large gains of the first, then the monotone polish of the second. The default: lowest
   // final cost of the three on 10 of the 11 shared scenes (bench/insertion_bench), mostly in
-  // about the time of the parallel form alone.
+  // about the time of the parallel form alone. On trees of kRegionalFrom nodes or more
+  // (half a million triangles), the regional form instead.
   hybrid,
+  // For large trees, the paper's sequential passes on all threads. Four stages: parallel
+  // passes by the measure until it stalls, sequential ones by the measure until it stalls
+  // again, then regional passes (random selection as in the paper; the tree is cut at a
+  // fixed depth into disjoint subtrees of about 32k nodes, and each candidate inside one is
+  // updated there, its children reinserted at the best place inside that subtree; the
+  // subtrees run at once, each on its own candidates in order), then the parallel form as a
+  // polish. The tree does not depend on the thread count. Hall at 1M and 4M triangles, 2
+  // threads: converges 0.7 % lower than hybrid's sequential-then-parallel in 0.6 of the time,
+  // but is behind it for the first 1.5 build times (docs/optimization-at-scale.md).
+  regional,
 };
 
+// Trees of at least this many nodes take the regional form under `hybrid`. Smaller trees
+// optimize in seconds, where the regional form's gain is within the spread of the seed (its
+// final cost was up to 0.4 % higher or lower on the 11 shared scenes, all below this size).
+inline constexpr size_t kRegionalFrom = size_t{1} << 20;
+
 std::string_view form_name(InsertionForm f);
-// "sequential", "parallel", "hybrid"; nullopt for anything else.
+// "sequential", "parallel", "hybrid", "regional"; nullopt for anything else.
 std::optional<InsertionForm> parse_form(std::string_view name);
 // Every form, in the order above.
 std::vector<InsertionForm> insertion_forms();

@@ -1,6 +1,7 @@
 #include "bvhopt/insertion_optimizer.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -45,12 +46,13 @@ std::string_view form_name(InsertionForm f) {
     case InsertionForm::sequential: return "sequential";
     case InsertionForm::parallel: return "parallel";
     case InsertionForm::hybrid: return "hybrid";
+    case InsertionForm::regional: return "regional";
   }
   return "hybrid";
 }
 
 std::vector<InsertionForm> insertion_forms() {
-  return {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid};
+  return {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid, InsertionForm::regional};
 }
 
 std::optional<InsertionForm> parse_form(std::string_view name) {
@@ -79,11 +81,23 @@ struct Plan {
   double delta = 0.0;
 };
 
+// How a stage's passes update their candidates: one after another over the whole tree (the
+// paper's), one after another within each of many disjoint subtrees at once (regional), or
+// planned all at once and applied in order (parallel).
+enum class PassKind { sequential, regional, parallel };
+
+// One stage: its passes, and whether it ends where selection by the measure stalls (leaving
+// the random passes to the next stage) rather than by the paper's rule.
+struct Stage {
+  PassKind kind;
+  bool until_measure_stalls = false;
+};
+
 // One stage of the optimizer (one form) over the tree, and its passes for the pass driver.
 class InsertionOptimizer {
  public:
-  InsertionOptimizer(Bvh& bvh, const InsertionConfig& config, bool parallel, const testing::AfterMove* after_move)
-      : bvh_(bvh), config_(config), parallel_(parallel), after_move_(after_move) {
+  InsertionOptimizer(Bvh& bvh, const InsertionConfig& config, Stage stage, const testing::AfterMove* after_move)
+      : bvh_(bvh), config_(config), stage_(stage), after_move_(after_move) {
     for (const BvhNode& n : bvh_.nodes) {
       if (n.is_leaf())
         leaf_term_ += leaf_cost(n.area(), n.ref_count());
@@ -97,9 +111,10 @@ class InsertionOptimizer {
 
   bool can_optimize() const { return root_area_ > 0.0 && bvh_.nodes.size() >= 5; }
 
-  // The sequential form can raise the cost (both children are out at once) and oscillates
-  // near the end, so it keeps the best tree it has seen. The parallel form never raises it.
-  bool keep_best_before(uint32_t /*pass*/) const { return !parallel_; }
+  // The sequential and regional forms can raise the cost (both children are out at once)
+  // and oscillate near the end, so they keep the best tree they have seen. The parallel
+  // form never raises it.
+  bool keep_best_before(uint32_t /*pass*/) const { return stage_.kind != PassKind::parallel; }
   // The best tree is kept as an undo log from it, not a copy: only one restore point is
   // ever live (the driver takes the next only after dropping the last), so the token is empty.
   struct Snapshot {};
@@ -112,30 +127,57 @@ class InsertionOptimizer {
 
   detail::PassResult run_pass(uint32_t pass, double stage_best) {
     // Once the measure has stalled, selection stays random (section 2.5): going back to the
-    // measure after a good random pass would only retry the nodes that just stalled.
-    random_ = random_ || without_improvement_ >= config_.random_after;
+    // measure after a good random pass would only retry the nodes that just stalled. The
+    // regional form selects at random from the start: it follows a stage that ended where
+    // the measure stalled.
+    random_ = random_ || without_improvement_ >= config_.random_after || stage_.kind == PassKind::regional;
     select(pass + 1, random_, candidates_);
     uint64_t moves = 0;
-    if (parallel_) {
+    if (stage_.kind == PassKind::parallel) {
       moves = pass_parallel(candidates_);
+    } else if (stage_.kind == PassKind::regional) {
+      moves = pass_regional();
     } else {
+      Scope whole = whole_tree();
       for (size_t i = 0; i < candidates_.size(); ++i) {
-        prefetch_ahead(i);
-        moves += update_sequential(candidates_[i]);
+        prefetch_ahead(candidates_, i);
+        moves += update_sequential(candidates_[i], whole);
         if (undo_.size() >= undo_limit() && !stay_within_log()) break;
       }
     }
     const double c = cost();
     // A relative margin, so that rounding noise in an oscillating tail or the endless tiny
     // gains of the parallel form never count as progress.
-    if (c < stage_best * (1.0 - config_.min_improvement))
+    // A stage that hands over to a faster one asks more of a pass: at 0.03 %, on the hall at
+    // 1M and 4M triangles, its last slow passes go to the next stage (a better tree from
+    // 1.5 build times on), and the converged cost is within the spread of the seed.
+    constexpr double kHandOverImprovement = 3e-4;
+    const double min_improvement =
+        stage_.until_measure_stalls ? std::max(config_.min_improvement, kHandOverImprovement) : config_.min_improvement;
+    if (c < stage_best * (1.0 - min_improvement))
       without_improvement_ = 0;
     else
       ++without_improvement_;
-    return {c, moves, 0.0, without_improvement_ >= config_.stop_after};
+    const uint32_t patience = stage_.until_measure_stalls ? config_.random_after : config_.stop_after;
+    return {c, moves, 0.0, without_improvement_ >= patience};
   }
 
  private:
+  // Where an update's changes go: the tracked sum of inner areas it changes, the undo lane
+  // its records go to (null: the log itself), and the node below which its refits stop and
+  // its searches stay (kInvalidNode: the whole tree). Plus its search scratch.
+  struct Scope {
+    double* area;
+    detail::UndoLog::Lane* lane;
+    uint32_t top;
+    std::vector<detail::SearchEntry>* heap;
+    std::vector<uint32_t>* path;
+  };
+  Scope whole_tree() { return {&inner_area_, nullptr, kInvalidNode, &heap_, &path_}; }
+  struct RegionScratch {
+    std::vector<detail::SearchEntry> heap;
+    std::vector<uint32_t> path;
+  };
 
   // The undo log holds at most one record per sixteenth of the nodes (2.75 bytes a node,
   // where a copy of the tree took 40; it keeps the optimizer under 100 bytes a triangle): a
@@ -160,12 +202,12 @@ class InsertionOptimizer {
 
   // Each update starts with misses on its candidate, the candidate's children and parent:
   // asked for a few updates ahead (the node first, its neighbours once it has arrived).
-  void prefetch_ahead(size_t i) const {
+  void prefetch_ahead(const std::vector<uint32_t>& list, size_t i) const {
     constexpr size_t kNodeAhead = 8, kLinksAhead = 4;
     const BvhNode* nodes = bvh_.nodes.data();
-    if (i + kNodeAhead < candidates_.size()) detail::prefetch_node(nodes, candidates_[i + kNodeAhead]);
-    if (i + kLinksAhead < candidates_.size()) {
-      const BvhNode& c = nodes[candidates_[i + kLinksAhead]];
+    if (i + kNodeAhead < list.size()) detail::prefetch_node(nodes, list[i + kNodeAhead]);
+    if (i + kLinksAhead < list.size()) {
+      const BvhNode& c = nodes[list[i + kLinksAhead]];
       if (c.is_leaf()) return;
       detail::prefetch_children(nodes, c);
       if (c.parent != kInvalidNode) detail::prefetch_node(nodes, c.parent);
@@ -212,27 +254,138 @@ class InsertionOptimizer {
 
   // The paper's step 2 for one node: remove N and its parent, reinsert both children
   // (larger first) at the best places in the tree as it is after the removal.
-  uint64_t update_sequential(uint32_t n) {
+  // In a region (sc.top), N and P must lie strictly inside it, and the children go back
+  // inside it: its root keeps its leaves, hence its box, and nothing above it changes.
+  uint64_t update_sequential(uint32_t n, Scope& sc) {
     if (n == bvh_.root || bvh_[n].is_leaf()) return 0;
     auto [a, b] = ordered_children(n);
     const uint32_t p = bvh_[n].parent;
     const uint32_t s = bvh_.sibling(n);
-    remove(n);
+    remove(n, sc);
     // Both searches start from N's sibling, which took P's place: the children's old
     // neighbourhood, usually close to their best place, so the bound prunes from the start.
-    insert(a, search_from(a, s), n);
-    insert(b, search_from(b, s), p);
-    notify_move();
+    insert(a, search_from(a, s, sc), n, sc);
+    insert(b, search_from(b, s, sc), p, sc);
+    if (sc.lane == nullptr) notify_move();
     return 1;
   }
 
   // The best place for subtree m (out of the tree) by the full search, seeded with `start`.
   // Its cost is taken from start's nearby ancestors only (placement_cost_near): walking them
   // all to the root was a quarter of the update's own time at 1M triangles.
-  uint32_t search_from(uint32_t m, uint32_t start) {
+  // In a region, start's ancestors are walked no higher than the region's root: its box
+  // contains m's, whose leaves it held.
+  uint32_t search_from(uint32_t m, uint32_t start, Scope& sc) {
     const Box& box = bvh_[m].box;
-    const ReinsertionCandidate seed{start, detail::placement_cost_near(bvh_, box, start, path_)};
-    return detail::search_reinsertion(bvh_, box, kInvalidNode, kInvalidNode, heap_, seed).node;
+    const ReinsertionCandidate seed{start, detail::placement_cost_near(bvh_, box, start, *sc.path)};
+    return detail::search_reinsertion(bvh_, box, kInvalidNode, sc.top, *sc.heap, seed, sc.top).node;
+  }
+
+  // The regional pass: the paper's random selection and sequential updates, in many
+  // disjoint subtrees (regions: the tree cut at a fixed depth) at once. A candidate whose
+  // node and parent lie strictly inside a region is updated there, in candidate order among
+  // the region's, its children searched for and put back only inside the region: the
+  // region's root keeps its leaves, hence its box, and nothing outside the region changes.
+  // Each region has its own undo lane and area change, gathered and added in region order:
+  // the tree and its tracked cost do not depend on the thread count. The few candidates at
+  // or above the cut follow, one by one over the whole tree.
+  //
+  // Why it is worth it: once selection is random, 99.9 % of the paper's sequential updates
+  // put both children back inside the region they came from (hall 1M, measured), so the
+  // restriction changes few outcomes while the updates spread over the threads.
+  uint64_t pass_regional() {
+    // The lanes write into the log's free room, shared by their numbers of candidates. A log
+    // too full for another pass first moves its restore point (or goes back to it).
+    constexpr size_t kRecordsPerUpdate = 8;  // measured: about 7
+    if (undo_.active() && undo_.size() + kRecordsPerUpdate * candidates_.size() > undo_.capacity()) stay_within_log();
+    cut_regions();
+    region_of_.resize(candidates_.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, candidates_.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) region_of_[i] = region_index(candidates_[i]);
+    });
+    const size_t regions = region_roots_.size();
+    region_lists_.resize(regions);
+    for (auto& l : region_lists_) l.clear();
+    for (size_t i = 0; i < candidates_.size(); ++i)
+      if (region_of_[i] != kInvalidNode) region_lists_[region_of_[i]].push_back(candidates_[i]);
+    lane_weights_.resize(regions);
+    for (size_t j = 0; j < regions; ++j) lane_weights_[j] = region_lists_[j].size();
+    undo_.open_lanes(lane_weights_, lanes_);
+    region_area_.assign(regions, 0.0);
+    region_moves_.assign(regions, 0);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, regions, 1), [&](const tbb::blocked_range<size_t>& r) {
+      RegionScratch& scratch = scratch_.local();
+      for (size_t j = r.begin(); j < r.end(); ++j) {
+        const uint32_t root = region_roots_[j];
+        Scope sc{&region_area_[j], &lanes_[j], root, &scratch.heap, &scratch.path};
+        const std::vector<uint32_t>& list = region_lists_[j];
+        for (size_t i = 0; i < list.size(); ++i) {
+          prefetch_ahead(list, i);
+          // Earlier updates of the region may have made the candidate a child of its root.
+          if (bvh_[list[i]].parent == root) continue;
+          region_moves_[j] += update_sequential(list[i], sc);
+        }
+      }
+    });
+    undo_.close_lanes(lanes_);
+    uint64_t moves = 0;
+    for (size_t j = 0; j < regions; ++j) {
+      inner_area_ += region_area_[j];
+      moves += region_moves_[j];
+    }
+    notify_move();
+    if (undo_.size() >= undo_limit() && !stay_within_log()) return moves;
+    Scope whole = whole_tree();
+    for (size_t i = 0; i < candidates_.size(); ++i) {
+      if (region_of_[i] != kInvalidNode) continue;
+      moves += update_sequential(candidates_[i], whole);
+      if (undo_.size() >= undo_limit() && !stay_within_log()) break;
+    }
+    return moves;
+  }
+
+  // The regions: the inner nodes at depth region_depth(), in depth-first order.
+  void cut_regions() {
+    const uint32_t depth = region_depth();
+    region_roots_.clear();
+    cut_.reset(bvh_.nodes.size());
+    cut_stack_.assign(1, {bvh_.root, 0});
+    while (!cut_stack_.empty()) {
+      const auto [v, d] = cut_stack_.back();
+      cut_stack_.pop_back();
+      const BvhNode& nd = bvh_[v];
+      if (nd.is_leaf()) continue;
+      if (d == depth) {
+        region_roots_.push_back(v);
+        cut_.insert(v);
+        continue;
+      }
+      cut_stack_.push_back({nd.right(), d + 1});
+      cut_stack_.push_back({nd.left(), d + 1});
+    }
+    root_index_.resize(region_roots_.size());
+    for (uint32_t j = 0; j < region_roots_.size(); ++j) root_index_[j] = {region_roots_[j], j};
+    std::sort(root_index_.begin(), root_index_.end());
+  }
+
+  // The region whose root lies strictly above n and n's parent, or kInvalidNode. The walk
+  // up reads the nodes that the update's refits will read again.
+  uint32_t region_index(uint32_t n) const {
+    if (cut_.contains(n)) return kInvalidNode;
+    uint32_t v = bvh_[n].parent;
+    if (v == kInvalidNode || cut_.contains(v)) return kInvalidNode;
+    while (v != kInvalidNode && !cut_.contains(v)) v = bvh_[v].parent;
+    if (v == kInvalidNode) return kInvalidNode;
+    return std::lower_bound(root_index_.begin(), root_index_.end(), std::pair<uint32_t, uint32_t>{v, 0})->second;
+  }
+
+  // About 32k nodes a region, and at least four regions. The count depends on the tree
+  // alone, never on the threads. Smaller regions restrict more moves (measured at 1M
+  // triangles: 16k nodes end 0.03 % higher, 64k 0.03 % lower, at the same speed); larger
+  // ones would leave many-core machines few regions to share.
+  uint32_t region_depth() const {
+    const double regions = static_cast<double>(bvh_.nodes.size()) / 32768.0;
+    return std::clamp<uint32_t>(static_cast<uint32_t>(std::ceil(std::log2(std::max(regions, 1.0)))), 2, 16);
   }
 
   // Meister-Bittner style: search every candidate against the current tree on all threads,
@@ -283,41 +436,46 @@ class InsertionOptimizer {
   }
 
   // Refits from `n` up, adding each area change to the tracked sum (Bvh::refit_upwards,
-  // saving each node before it changes).
-  void refit_up(uint32_t n) {
-    for (; n != kInvalidNode; n = bvh_[n].parent) {
+  // saving each node before it changes). In a region it stops below the region's root, whose
+  // box is stale only while both children of an update are out.
+  void refit_up(uint32_t n, Scope& sc) {
+    for (; n != sc.top; n = bvh_[n].parent) {
       BvhNode& nd = bvh_[n];
       const Box b = merge(bvh_[nd.left()].box, bvh_[nd.right()].box);
       if (b == nd.box) return;
-      undo_.save(bvh_, n);
+      save(n, sc);
       const double old_area = nd.area();
       nd.set_box(b);
-      inner_area_ += nd.area() - old_area;
+      *sc.area += nd.area() - old_area;
     }
   }
-  void save(uint32_t n) {
-    if (n != kInvalidNode) undo_.save(bvh_, n);
+  void save(uint32_t n, Scope& sc) {
+    if (n == kInvalidNode) return;
+    if (sc.lane)
+      undo_.save(bvh_, n, *sc.lane);
+    else
+      undo_.save(bvh_, n);
   }
 
   // Figure 3: N and its parent P leave the tree, N's sibling takes P's place.
-  void remove(uint32_t n) { detach(n, bvh_[n].area()); }
+  void remove(uint32_t n, Scope& sc) { detach(n, sc, bvh_[n].area()); }
 
   // Figure 5: `free_node` becomes the parent of X and L, in X's old place.
-  void insert(uint32_t l, uint32_t x, uint32_t free_node) {
+  void insert(uint32_t l, uint32_t x, uint32_t free_node, Scope& sc) {
     const uint32_t q = bvh_[x].parent;
-    for (uint32_t v : {free_node, q, x, l}) save(v);
+    for (uint32_t v : {free_node, q, x, l}) save(v, sc);
     BvhNode& f = bvh_[free_node];
     f.make_inner(x, l);
     f.parent = q;
     f.set_box(merge(bvh_[x].box, bvh_[l].box));
-    inner_area_ += f.area();
+    *sc.area += f.area();
     if (q == kInvalidNode)
       bvh_.root = free_node;
     else
       bvh_[q].set_child(bvh_.child_slot(x), free_node);
     bvh_[x].parent = free_node;
     bvh_[l].parent = free_node;
-    if (q != kInvalidNode) refit_up(q);
+    if (q != kInvalidNode) refit_up(q, sc);
   }
 
   // The parallel form moves one subtree at a time (as Meister and Bittner do), so every
@@ -348,19 +506,19 @@ class InsertionOptimizer {
   // Takes `m` and its parent out (the parent becomes free, the sibling takes its place);
   // m keeps its subtree.
   // `also_removed`: the area of m itself when m leaves the tree's inner nodes too (remove).
-  uint32_t detach(uint32_t m, double also_removed = 0.0) {
+  uint32_t detach(uint32_t m, Scope& sc, double also_removed = 0.0) {
     const uint32_t p = bvh_[m].parent;
     const uint32_t s = bvh_.sibling(m);
     const uint32_t g = bvh_[p].parent;
-    for (uint32_t v : {m, p, s, g}) save(v);
-    inner_area_ -= also_removed + bvh_[p].area();
+    for (uint32_t v : {m, p, s, g}) save(v, sc);
+    *sc.area -= also_removed + bvh_[p].area();
     if (g == kInvalidNode) {
       bvh_.root = s;
       bvh_[s].parent = kInvalidNode;
     } else {
       bvh_[g].set_child(bvh_.child_slot(p), s);
       bvh_[s].parent = g;
-      refit_up(g);
+      refit_up(g, sc);
     }
     bvh_[m].parent = kInvalidNode;
     bvh_[p].parent = kInvalidNode;
@@ -389,8 +547,9 @@ class InsertionOptimizer {
     const uint32_t saved_root = bvh_.root;
     const double saved_area = inner_area_;
 
-    const uint32_t free_node = detach(m);
-    insert(m, x, free_node);
+    Scope whole = whole_tree();
+    const uint32_t free_node = detach(m, whole);
+    insert(m, x, free_node, whole);
 
     if (inner_area_ >= saved_area) {
       // Boxes that earlier moves of the pass changed made the plan wrong; undo it. Restoring
@@ -413,7 +572,7 @@ class InsertionOptimizer {
 
   Bvh& bvh_;
   const InsertionConfig& config_;
-  const bool parallel_;
+  const Stage stage_;
   const testing::AfterMove* after_move_;  // may be null
   bool random_ = false;                   // selection has turned random for the rest of the stage
   uint32_t without_improvement_ = 0;      // passes since the last one that counted as progress
@@ -429,18 +588,37 @@ class InsertionOptimizer {
   std::vector<Plan> plans_;
   detail::NodeSet touched_;  // nodes a move of this parallel pass changed
   detail::UndoLog undo_;
+  // The regional passes': the cut (region roots, by id too, and as a set), each candidate's
+  // region, and each region's candidates, undo lane, area change and moves.
+  std::vector<uint32_t> region_roots_;
+  std::vector<std::pair<uint32_t, uint32_t>> root_index_;  // (root, region), by root
+  std::vector<std::pair<uint32_t, uint32_t>> cut_stack_;
+  detail::NodeSet cut_;
+  std::vector<uint32_t> region_of_;
+  std::vector<std::vector<uint32_t>> region_lists_;
+  std::vector<detail::UndoLog::Lane> lanes_;
+  std::vector<size_t> lane_weights_;
+  std::vector<double> region_area_;
+  std::vector<uint64_t> region_moves_;
+  tbb::enumerable_thread_specific<RegionScratch> scratch_;
 
   double leaf_cost(double area, uint32_t count) const { return config_.cost.intersection * area * count; }
 };
 
-// The stages of each form: false for a sequential stage, true for a parallel one.
-std::vector<bool> stages_of(InsertionForm form) {
+// The stages of each form.
+std::vector<Stage> stages_of(InsertionForm form, size_t node_count) {
+  const std::vector<Stage> regional = {{PassKind::parallel, true},
+                                       {PassKind::sequential, true},
+                                       {PassKind::regional},
+                                       {PassKind::parallel}};
   switch (form) {
-    case InsertionForm::sequential: return {false};
-    case InsertionForm::parallel: return {true};
-    case InsertionForm::hybrid: return {false, true};
+    case InsertionForm::sequential: return {{PassKind::sequential}};
+    case InsertionForm::parallel: return {{PassKind::parallel}};
+    case InsertionForm::regional: return regional;
+    case InsertionForm::hybrid: break;
   }
-  return {false, true};
+  if (node_count >= kRegionalFrom) return regional;
+  return {{PassKind::sequential}, {PassKind::parallel}};
 }
 
 OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const testing::AfterMove* after_move) {
@@ -457,7 +635,7 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
   for (size_t i = bvh.nodes.size(); i-- > 0;)
     if (!bvh.nodes[i].is_leaf()) bvh.refit_node(static_cast<uint32_t>(i));
   {
-    InsertionOptimizer probe(bvh, config, false, after_move);
+    InsertionOptimizer probe(bvh, config, {PassKind::sequential}, after_move);
     // A zero-area root has no ratio to track: its cost is the limit sah_cost defines, as
     // every optimizer reports it.
     driver.set_initial_cost(probe.can_optimize() ? probe.cost() : sah_cost(bvh, config.cost));
@@ -468,9 +646,9 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
   }
   {
     const detail::HugePageBacking huge_pages(bvh.nodes);
-    for (bool parallel : stages_of(config.form)) {
+    for (Stage s : stages_of(config.form, bvh.nodes.size())) {
       // Each stage starts afresh from the tree the last one left (its tracked sums included).
-      InsertionOptimizer stage(bvh, config, parallel, after_move);
+      InsertionOptimizer stage(bvh, config, s, after_move);
       driver.run(stage);
       if (driver.stop_reason() != StopReason::converged) break;
     }

@@ -3,6 +3,7 @@
 // nodes of a huge tree neither scans nor reallocates a per-node array.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <vector>
 
@@ -25,6 +26,14 @@ class NodeSet {
     members_.push_back(n);
     return true;
   }
+  // insert() for threads that share the set, each inserting ids of its own: the bit is set
+  // atomically (ids of different threads may share a word) and the id is not listed; the
+  // caller lists it with adopt() once the threads are done.
+  bool insert_shared(uint32_t n) {
+    const uint64_t bit = uint64_t{1} << (n & 63);
+    return !(std::atomic_ref<uint64_t>(bits_[n >> 6]).fetch_or(bit, std::memory_order_relaxed) & bit);
+  }
+  void adopt(uint32_t n) { members_.push_back(n); }
   void clear() {
     for (uint32_t n : members_) bits_[n >> 6] = 0;
     members_.clear();

@@ -63,10 +63,13 @@ inline double placement_cost_near(const Bvh& bvh, const Box& box, uint32_t x, st
 // loop allocates nothing. `start`, if given, is a place near where the subtree was (the
 // first candidate, not restricted by skip or pass_through): its cost bounds the search from
 // the first step, so far fewer nodes are queued; the minimum found is the same (on a tie
-// the start is kept).
+// the start is kept). `from`, if given, searches only its subtree, as if it were the whole
+// tree: the search of a regional pass, where `box` came from that subtree, so that nothing
+// above `from` grows wherever it goes inside (pass `from` as pass_through too, to keep it).
 inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, uint32_t skip, uint32_t pass_through,
                                                std::vector<SearchEntry>& heap,
-                                               ReinsertionCandidate start = {kInvalidNode, 0.0}) {
+                                               ReinsertionCandidate start = {kInvalidNode, 0.0},
+                                               uint32_t from = kInvalidNode) {
   ReinsertionCandidate best{kInvalidNode, std::numeric_limits<double>::infinity()};
   if (bvh.empty()) return best;
   if (start.node != kInvalidNode) best = start;
@@ -77,12 +80,13 @@ inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, u
   // The root is the only node evaluated on its own; every other node is evaluated when its
   // parent is expanded, so a good C_best is known before anything is queued and leaves
   // never enter the queue.
+  const uint32_t root = from == kInvalidNode ? bvh.root : from;
   {
-    const BvhNode& r = nodes[bvh.root];
-    if (bvh.root != skip) {
+    const BvhNode& r = nodes[root];
+    if (root != skip) {
       const double direct = merge(r.box, box).area();
-      if (bvh.root != pass_through && (start.node == kInvalidNode || direct < best.cost)) best = {bvh.root, direct};
-      if (!r.is_leaf()) heap.push_back({direct - static_cast<double>(r.area()), bvh.root});
+      if (root != pass_through && (start.node == kInvalidNode || direct < best.cost)) best = {root, direct};
+      if (!r.is_leaf()) heap.push_back({direct - static_cast<double>(r.area()), root});
     }
   }
   while (!heap.empty()) {
