@@ -59,14 +59,14 @@ enum class InsertionForm {
   // updated there, its children reinserted at the best place inside that subtree; the
   // subtrees run at once, each on its own candidates in order), then the parallel form as a
   // polish. The tree does not depend on the thread count. Hall at 1M and 4M triangles, 2
-  // threads: converges 0.7 % lower than hybrid's sequential-then-parallel in 0.6 of the time,
-  // but is behind it for the first 1.5 build times (docs/optimization-at-scale.md).
+  // threads: converges 0.5-0.9 % lower than sequential-then-parallel in 0.65-0.9 of the
+  // time, but is behind it for the first 1.5 build times (docs/optimization-at-scale.md).
   regional,
 };
 
 // Trees of at least this many nodes take the regional form under `hybrid`. Smaller trees
-// optimize in seconds, where the regional form's gain is within the spread of the seed (its
-// final cost was up to 0.4 % higher or lower on the 11 shared scenes, all below this size).
+// optimize in seconds, where the regional form's gain is within the spread of the seed (on
+// the 11 shared scenes, all below this size, it ended from 0.22 % lower to 0.23 % higher).
 inline constexpr size_t kRegionalFrom = size_t{1} << 20;
 
 std::string_view form_name(InsertionForm f);
