@@ -38,7 +38,7 @@ struct BvhNode {
   uint32_t left_or_first = kInvalidNode;  // inner: left child; leaf: first slot in ref_indices
   uint32_t right_or_count = 0;            // inner: right child; leaf: count | kLeafFlag
 
-  double area() const { return box.area(); }
+  [[gnu::always_inline]] double area() const { return box.area(); }
   bool is_leaf() const { return (right_or_count & kLeafFlag) != 0; }
   uint32_t left() const { return left_or_first; }
   uint32_t right() const { return right_or_count; }
