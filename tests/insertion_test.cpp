@@ -212,7 +212,6 @@ TEST(InsertionSearch, SearchInsideASubtreeEqualsBruteForceThere) {
   std::mt19937_64 rng(5151);
   std::vector<detail::SearchEntry> heap;
   std::vector<uint32_t> path;
-  int checked = 0;
   for (uint32_t trial = 0; trial < 2000; ++trial) {
     const uint32_t count = 4 + static_cast<uint32_t>(rng() % 150);
     PrimitiveRefs refs = testing::random_refs(count, 70000 + trial);
@@ -249,9 +248,7 @@ TEST(InsertionSearch, SearchInsideASubtreeEqualsBruteForceThere) {
     ASSERT_EQ(fast.cost, best) << "trial " << trial;
     ASSERT_NE(std::find(inside.begin(), inside.end(), fast.node), inside.end()) << "trial " << trial;
     ASSERT_EQ(detail::placement_cost(bvh, box, fast.node, path), fast.cost) << "trial " << trial;
-    ++checked;
   }
-  EXPECT_EQ(checked, 2000);
 }
 
 // The undo log gives back exactly the tree of its restore point, whatever was changed after.

@@ -59,8 +59,8 @@ enum class InsertionForm {
   // updated there, its children reinserted at the best place inside that subtree; the
   // subtrees run at once, each on its own candidates in order), then the parallel form as a
   // polish. The tree does not depend on the thread count. Hall at 1M and 4M triangles, 2
-  // threads: converges 0.5-0.9 % lower than sequential-then-parallel in 0.65-0.9 of the
-  // time, but is behind it for the first 1.5 build times (docs/optimization-at-scale.md).
+  // threads: converges 0.5-0.9 % lower than sequential-then-parallel in 0.55-0.8 of the
+  // time, but can be behind it for the first 1.5 build times (docs/optimization-at-scale.md).
   regional,
 };
 
