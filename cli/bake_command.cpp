@@ -194,9 +194,9 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOptio
   InsertionConfig insertion;
   insertion.cost = cost;
   insertion.limits.time_limit = s.budget_seconds;
-  // Within about one build time the paper's sequential passes gain the most (hall, 1M
-  // triangles: 266.1 against 269.8 for the regional form that the default takes on trees
-  // that large, which is ahead from about 1.5 build times on and converges lower).
+  // Within one build time the paper's sequential passes gain the most (hall, 1M triangles:
+  // 266.1, against 266.0-269.8 for the regional form that the default takes on trees that
+  // large; that form is ahead from about 1.5 build times on, and converges lower).
   if (opt.quality == "fast") insertion.form = InsertionForm::sequential;
   GainEstimate gain(s.cost_built);
   insertion.limits.on_pass = [&](const PassRecord& p) {

@@ -60,7 +60,7 @@ enum class InsertionForm {
   // subtrees run at once, each on its own candidates in order), then the parallel form as a
   // polish. The tree does not depend on the thread count. Hall at 1M and 4M triangles, 2
   // threads: converges 0.5-0.9 % lower than sequential-then-parallel in 0.55-0.8 of the
-  // time, but can be behind it for the first 1.5 build times (docs/optimization-at-scale.md).
+  // time, but level with it or behind within one build time (docs/optimization-at-scale.md).
   regional,
 };
 
