@@ -88,6 +88,7 @@ struct BakeStart {
   OptimizeReport report;
   uint64_t leaves = 0;
   uint64_t references = 0;  // made by the builder (before the collapse keeps one per triangle in a leaf)
+  std::string insertion_form;  // the form the optimizer took (hybrid resolves by the tree's size)
   Bvh bvh;
   PrimitiveRefs refs;
 };
@@ -198,6 +199,7 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOptio
   // 266.1, against 266.0-269.8 for the regional form that the default takes on trees that
   // large; that form is ahead from about 1.5 build times on, and converges lower).
   if (opt.quality == "fast") insertion.form = InsertionForm::sequential;
+  s.insertion_form = std::string(form_name(resolved_form(insertion.form, s.bvh.nodes.size())));
   GainEstimate gain(s.cost_built);
   insertion.limits.on_pass = [&](const PassRecord& p) {
     gain.add(p.best_cost);
@@ -286,6 +288,7 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
                       {"cost", s.cost_final},
                       {"passes", s.report.passes},
                       {"stop_reason", std::string(stop_reason_name(s.report.stop_reason))},
+                      {"insertion_form", s.insertion_form},
                       {"leaves", s.leaves}});
   }
   print_json({{"scene", opt.scene.spec},
@@ -304,6 +307,7 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
               {"cost", best.cost_final},
               {"passes", best.report.passes},
               {"stop_reason", std::string(stop_reason_name(best.report.stop_reason))},
+              {"insertion_form", best.insertion_form},
               {"leaves", best.leaves},
               {"start_leaf_size", best.spec.leaf_size},
               {"start_spatial_max", best.spec.spatial_max},

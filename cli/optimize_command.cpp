@@ -187,7 +187,7 @@ std::string trace_csv(const OptimizeReport& report) {
 
 void print_report_json(const OptimizeOptions& opt, const Loaded& in, const BvhFileInfo& info, const OptimizeReport& report,
                        double ocost) {
-  print_json({{"input", opt.input.spec},
+  nlohmann::json j = {{"input", opt.input.spec},
                   {"method", opt.method},
                   {"file_method", info.method},
                   {"triangles", info.scene_triangles},
@@ -204,7 +204,12 @@ void print_report_json(const OptimizeOptions& opt, const Loaded& in, const BvhFi
                   {"seconds", report.seconds},
                   {"stop_reason", std::string(stop_reason_name(report.stop_reason))},
                   {"cost_trace", opt.trace_path},
-                  {"output", opt.output}});
+                  {"output", opt.output}};
+  // Which insertion form ran: hybrid takes another on large trees.
+  if (parse_optimizer_method(opt.method) == OptimizerMethod::insertion)
+    j["insertion_form"] = std::string(form_name(resolved_form(parse_form(opt.form).value_or(InsertionConfig{}.form),
+                                                              in.bvh.nodes.size())));
+  print_json(j);
 }
 
 void print_summary(const OptimizeOptions& opt, const Loaded& in, const BvhFileInfo& info, const OptimizeReport& report,

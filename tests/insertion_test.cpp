@@ -614,6 +614,16 @@ TEST(InsertionOptimizer, TinyTreesAreLeftAlone) {
   }
 }
 
+// hybrid is the regional form from kRegionalFrom nodes on, and only hybrid resolves.
+TEST(InsertionOptimizer, HybridResolvesToRegionalOnLargeTrees) {
+  EXPECT_EQ(resolved_form(InsertionForm::hybrid, kRegionalFrom - 1), InsertionForm::hybrid);
+  EXPECT_EQ(resolved_form(InsertionForm::hybrid, kRegionalFrom), InsertionForm::regional);
+  for (InsertionForm f : {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::regional}) {
+    EXPECT_EQ(resolved_form(f, 5), f);
+    EXPECT_EQ(resolved_form(f, kRegionalFrom * 4), f);
+  }
+}
+
 TEST(InsertionOptimizer, MeasureNames) {
   for (InsertionMeasure m : {InsertionMeasure::area, InsertionMeasure::sum, InsertionMeasure::min, InsertionMeasure::comb})
     EXPECT_EQ(parse_measure(measure_name(m)), m);

@@ -52,6 +52,7 @@ TEST_F(OptimizeCli, SceneToAnnealedFileWithTraceAndJson) {
       << err;
   nlohmann::json j = nlohmann::json::parse(out);
   EXPECT_EQ(j["method"], "anneal");
+  EXPECT_FALSE(j.contains("insertion_form"));
   EXPECT_EQ(j["file_method"], "sweep+anneal");
   EXPECT_LT(j["cost_after"].get<double>(), j["cost_before"].get<double>());
   EXPECT_LE(j["ocost"].get<double>(), j["cost_after"].get<double>() + 1e-9);
@@ -104,6 +105,7 @@ TEST_F(OptimizeCli, DefaultMethodIsInsertionAndTimeBudgetStopsOnTheBestTree) {
       << err;
   nlohmann::json j = nlohmann::json::parse(out);
   EXPECT_EQ(j["method"], "insertion");
+  EXPECT_EQ(j["insertion_form"], "hybrid");  // a small tree: hybrid stays itself
   EXPECT_EQ(j["stop_reason"], "time limit");
   EXPECT_EQ(j["passes"], 1);
   EXPECT_LE(j["cost_after"].get<double>(), j["cost_before"].get<double>());
@@ -251,6 +253,8 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
   // Another builder on request, and sweep for the other qualities.
   ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality fast --json -o " + a.string(), &out, &err), 0) << err;
   EXPECT_EQ(nlohmann::json::parse(out)["builder"], "sweep");
+  EXPECT_EQ(nlohmann::json::parse(out)["insertion_form"], "sequential");  // fast: the paper's form
+  EXPECT_EQ(nlohmann::json::parse(out)["starts"][0]["insertion_form"], "sequential");
   ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --builder sbvh --budget 1.1 --json -o " + a.string(), &out, &err),
             0)
       << err;

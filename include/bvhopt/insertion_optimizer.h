@@ -68,6 +68,10 @@ enum class InsertionForm {
 // optimize in seconds, where the regional form's gain is within the spread of the seed (on
 // the 11 shared scenes, all below this size, it ended from 0.22 % lower to 0.23 % higher).
 inline constexpr size_t kRegionalFrom = size_t{1} << 20;
+// The form a run takes on a tree of `node_count` nodes: hybrid is regional from
+// kRegionalFrom nodes on; every other form is itself. What `optimize --json` and `bake
+// --json` report as "insertion_form".
+InsertionForm resolved_form(InsertionForm form, size_t node_count);
 
 std::string_view form_name(InsertionForm f);
 // "sequential", "parallel", "hybrid", "regional"; nullopt for anything else.

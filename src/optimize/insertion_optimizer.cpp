@@ -55,6 +55,10 @@ std::vector<InsertionForm> insertion_forms() {
   return {InsertionForm::sequential, InsertionForm::parallel, InsertionForm::hybrid, InsertionForm::regional};
 }
 
+InsertionForm resolved_form(InsertionForm form, size_t node_count) {
+  return form == InsertionForm::hybrid && node_count >= kRegionalFrom ? InsertionForm::regional : form;
+}
+
 std::optional<InsertionForm> parse_form(std::string_view name) {
   return detail::find_by_name(insertion_forms(), form_name, name);
 }
@@ -645,13 +649,12 @@ std::vector<Stage> stages_of(InsertionForm form, size_t node_count) {
                                        {PassKind::sequential, true},
                                        {PassKind::regional},
                                        {PassKind::parallel}};
-  switch (form) {
+  switch (resolved_form(form, node_count)) {
     case InsertionForm::sequential: return {{PassKind::sequential}};
     case InsertionForm::parallel: return {{PassKind::parallel}};
     case InsertionForm::regional: return regional;
     case InsertionForm::hybrid: break;
   }
-  if (node_count >= kRegionalFrom) return regional;
   return {{PassKind::sequential}, {PassKind::parallel}};
 }
 
