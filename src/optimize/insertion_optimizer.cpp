@@ -170,18 +170,17 @@ class InsertionOptimizer {
   // Where an update's changes go: the tracked sum of inner areas it changes, the undo lane
   // its records go to (null: the log itself), and the node below which its refits stop and
   // its searches stay (kInvalidNode: the whole tree). Plus its search scratch.
+  struct Scratch {
+    std::vector<detail::SearchEntry> heap;
+    std::vector<uint32_t> path;
+  };
   struct Scope {
     double* area;
     detail::UndoLog::Lane* lane;
     uint32_t top;
-    std::vector<detail::SearchEntry>* heap;
-    std::vector<uint32_t>* path;
+    Scratch* scratch;
   };
-  Scope whole_tree() { return {&inner_area_, nullptr, kInvalidNode, &heap_, &path_}; }
-  struct RegionScratch {
-    std::vector<detail::SearchEntry> heap;
-    std::vector<uint32_t> path;
-  };
+  Scope whole_tree() { return {&inner_area_, nullptr, kInvalidNode, &scratch_}; }
 
   // The undo log holds at most one record per sixteenth of the nodes (2.75 bytes a node,
   // where a copy of the tree took 40; it keeps the optimizer under 100 bytes a triangle): a
@@ -281,8 +280,8 @@ class InsertionOptimizer {
   // contains m's, whose leaves it held.
   uint32_t search_from(uint32_t m, uint32_t start, Scope& sc) {
     const Box& box = bvh_[m].box;
-    const ReinsertionCandidate seed{start, detail::placement_cost_near(bvh_, box, start, *sc.path)};
-    return detail::search_reinsertion(bvh_, box, kInvalidNode, sc.top, *sc.heap, seed, sc.top).node;
+    const ReinsertionCandidate seed{start, detail::placement_cost_near(bvh_, box, start, sc.scratch->path)};
+    return detail::search_reinsertion(bvh_, box, kInvalidNode, sc.top, sc.scratch->heap, seed, sc.top).node;
   }
 
   // The regional pass: the paper's random selection and sequential updates, in many
@@ -317,10 +316,10 @@ class InsertionOptimizer {
     region_area_.assign(regions, 0.0);
     region_moves_.assign(regions, 0);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, regions, 1), [&](const tbb::blocked_range<size_t>& r) {
-      RegionScratch& scratch = scratch_.local();
+      Scratch& scratch = region_scratch_.local();
       for (size_t j = r.begin(); j < r.end(); ++j) {
         const uint32_t root = region_roots_[j];
-        Scope sc{&region_area_[j], &lanes_[j], root, &scratch.heap, &scratch.path};
+        Scope sc{&region_area_[j], &lanes_[j], root, &scratch};
         const std::vector<uint32_t>& list = region_lists_[j];
         for (size_t i = 0; i < list.size(); ++i) {
           prefetch_ahead(list, i);
@@ -618,8 +617,7 @@ class InsertionOptimizer {
   double inner_area_ = 0.0;
   double leaf_term_ = 0.0;
   double root_area_ = 0.0;
-  std::vector<detail::SearchEntry> heap_;
-  std::vector<uint32_t> path_;
+  Scratch scratch_;  // the whole tree's searches
   size_t inner_count_ = 0;
   std::vector<uint64_t> keys_;
   detail::LargestKeys largest_;
@@ -638,7 +636,7 @@ class InsertionOptimizer {
   std::vector<size_t> lane_weights_;
   std::vector<double> region_area_;
   std::vector<uint64_t> region_moves_;
-  tbb::enumerable_thread_specific<RegionScratch> scratch_;
+  tbb::enumerable_thread_specific<Scratch> region_scratch_;
 
   double leaf_cost(double area, uint32_t count) const { return config_.cost.intersection * area * count; }
 };
