@@ -20,10 +20,12 @@ def main() -> int:
     listing = subprocess.run(["objdump", "-d", "--no-show-raw-insn", "-C", exe],
                              capture_output=True, text=True, check=True).stdout
     function, leaks, kernels = None, {}, 0
+    start, data_end = 0, 0
     for line in listing.splitlines():
-        header = re.match(r"^[0-9a-f]+ <(.*)>:$", line)
+        header = re.match(r"^([0-9a-f]+) <(.*)>:$", line)
         if header:
-            function = header.group(1)
+            start, data_end = int(header.group(1), 16), 0
+            function = header.group(2)
             kernels += "bvhopt::wide_kernels::" in function
             continue
         if function is None or "bvhopt::wide_kernels::" in function:
@@ -31,7 +33,17 @@ def main() -> int:
         fields = line.split("\t")
         if len(fields) < 2:
             continue
+        address = int(fields[0].strip().rstrip(":"), 16)
         instruction = fields[-1].strip()
+        # clang's -fsanitize=function puts 8 bytes before each function's code, jumped over:
+        # a signature and the address of the function's type. objdump decodes those bytes as
+        # instructions too, and an address can read as one with a v (a sanitizer build once
+        # showed 'vmwrite'), so they are skipped.
+        if address == start and re.match(r"jmp\s+[0-9a-f]+ <.*\+0x8>$", instruction):
+            data_end = start + 8
+            continue
+        if address < data_end:
+            continue
         # VEX and EVEX mnemonics start with v (vmovd, vxorps, ...); ymm and zmm registers
         # exist only with AVX.
         if re.match(r"v[a-z]", instruction) or "%ymm" in instruction or "%zmm" in instruction:
