@@ -8,6 +8,7 @@
 #include <bit>
 #include <cmath>
 #include <functional>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -680,10 +681,14 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     }
   }
   {
-    const detail::HugePageBacking huge_pages(bvh.nodes);
+    std::optional<detail::HugePageBacking> huge_pages;
     for (Stage s : stages_of(config.form, bvh.nodes.size())) {
       // Each stage starts afresh from the tree the last one left (its tracked sums included).
       InsertionOptimizer stage(bvh, config, s, after_move);
+      // Only once the first stage has summed the areas: that scan walks the array in the
+      // order the collapse does and waited on each page it was copying (1M triangles: the
+      // first pass ended at 0.30 s instead of 0.13 s).
+      if (!huge_pages) huge_pages.emplace(bvh.nodes);
       driver.run(stage);
       if (driver.stop_reason() != StopReason::converged) break;
     }
