@@ -681,6 +681,9 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     }
   }
   {
+    const double time_limit = config.limits.time_limit;
+    const bool huge_pages_pay = detail::HugePageBacking::pays_off(
+        bvh.nodes.size() * sizeof(BvhNode), time_limit == 0.0 ? 0.0 : std::max(time_limit - driver.elapsed(), 1e-9));
     std::optional<detail::HugePageBacking> huge_pages;
     for (Stage s : stages_of(config.form, bvh.nodes.size())) {
       // Each stage starts afresh from the tree the last one left (its tracked sums included).
@@ -688,7 +691,7 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
       // Only once the first stage has summed the areas: that scan walks the array in the
       // order the collapse does and waited on each page it was copying (1M triangles: the
       // first pass ended at 0.30 s instead of 0.13 s).
-      if (!huge_pages) huge_pages.emplace(bvh.nodes);
+      if (!huge_pages && huge_pages_pay) huge_pages.emplace(bvh.nodes);
       driver.run(stage);
       if (driver.stop_reason() != StopReason::converged) break;
     }
