@@ -6,13 +6,18 @@
 //   trace_bench [--scenes DIR] [--scene FILE]... [--count N] [--repeats R]
 //               [--kinds primary,random,ao] [--optimizers] [--quick] [--opt-seconds S]
 //               [--best-seconds S] [--best-leaf N] [--json FILE]
-//               [--no-wide] [--wide-variants] [--fit-costs]
+//               [--no-wide] [--wide-variants] [--fit-costs] [--baked DIR]
 //
 // The row "best" is the tree a user would trace: sweep SAH, insertion optimization for
 // --best-seconds (default 10), compaction into leaves of up to --best-leaf (default 8) with
 // the default c_T/c_I. --quick keeps only sweep-l1 and best.
 //
-// Wide rows (unless --no-wide): the best tree and the sweep-l1 tree collapsed SAH-optimally
+// With --baked DIR, the row "baked" is the tree in DIR/<scene name without extension>.bvh,
+// as `bvhopt bake SCENE --quality best -o` wrote it: our best tree once spatial splits are
+// allowed (the best of several optimized starts, split or not; docs/spatial-splits.md).
+// It is traced with the references stored in the file. Scenes without a file get no row.
+//
+// Wide rows (unless --no-wide): the best tree (and the baked one) and the sweep-l1 tree collapsed SAH-optimally
 // into bvh8 and bvh4 and traced by the wide tracer (the ISA default_isa() picks), the best
 // bvh8 also on 2 threads, beside Embree MEDIUM and HIGH. --wide-variants adds the best bvh8
 // with the other choices: distance-sorted children, the watertight triangle test, the greedy
@@ -52,6 +57,7 @@
 #include "bench_support.h"
 
 #include "bvhopt/build.h"
+#include "bvhopt/bvh_file.h"
 #include "bvhopt/collapse_leaves.h"
 #include "bvhopt/cost.h"
 #include "bvhopt/error.h"
@@ -89,6 +95,7 @@ struct Options {
   bool wide = true;
   bool wide_variants = false;
   bool fit_costs = false;
+  std::string baked_dir;  // empty: no "baked" row
 };
 
 Options parse(int argc, char** argv) {
@@ -109,6 +116,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--opt-seconds") o.opt_seconds = std::stod(args.value());
     else if (a == "--best-seconds") o.best_seconds = std::stod(args.value());
     else if (a == "--best-leaf") o.best_leaf = static_cast<uint32_t>(std::stoul(args.value()));
+    else if (a == "--baked") o.baked_dir = args.value();
     else if (a == "--kinds") {
       o.kinds.clear();
       for (const std::string& k : split_list(args.value())) {
@@ -121,7 +129,8 @@ Options parse(int argc, char** argv) {
                    "            [--kinds primary,random,ao,path,shadow] [--optimizers] [--opt-seconds S]\n"
                    "            [--quick] [--wall]   (only the leaf-1 sweep tree and best)\n"
                    "            [--best-seconds S] [--best-leaf N]   (the 'best' row; S = 0 drops it)\n"
-                   "            [--json FILE] [--no-wide] [--wide-variants] [--fit-costs]\n";
+                   "            [--json FILE] [--no-wide] [--wide-variants] [--fit-costs]\n"
+                   "            [--baked DIR]   (the 'baked' row: DIR/<scene>.bvh from bvhopt bake --quality best)\n";
       std::exit(0);
     } else {
       throw Error("trace_bench: unknown option '" + a + "'");
@@ -333,7 +342,7 @@ std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mes
     w.layout_seconds = seconds_of([&] { w.tracer = std::make_unique<WideTracer>(t.flat, mesh, o); });
     out.push_back(std::move(w));
   };
-  for (const char* name : {"best", "sweep-l1"}) {
+  for (const char* name : {"best", "baked", "sweep-l1"}) {
     for (const Tree& t : trees) {
       if (t.name != name) continue;
       for (uint32_t width : {8u, 4u}) {
@@ -420,12 +429,12 @@ int run(const Options& opt) {
     const PrimitiveRefs refs = make_references(mesh);
 
     std::vector<Tree> trees;
-    auto add_tree = [&](const std::string& name, Bvh bvh, double secs) {
+    auto add_tree = [&](const std::string& name, Bvh bvh, double secs, const PrimitiveRefs* own_refs = nullptr) {
       Tree t;
       t.name = name;
       t.sah = sah_cost(bvh);
       t.seconds = secs;
-      t.flat = finalize(bvh, refs);
+      t.flat = finalize(bvh, own_refs ? *own_refs : refs);
       t.tracer = std::make_unique<Tracer>(t.flat, mesh);
       trees.push_back(std::move(t));
     };
@@ -458,6 +467,17 @@ int run(const Options& opt) {
         collapse_leaves(bvh, cc);
       });
       add_tree("best", std::move(bvh), s);
+    }
+    if (!opt.baked_dir.empty()) {
+      const fs::path file = fs::path(opt.baked_dir) / (fs::path(scene_path).stem().string() + ".bvh");
+      if (fs::exists(file)) {
+        BvhFile baked = read_bvh_file(file);
+        check_tree_matches_scene(file.string(), baked.info, mesh);
+        add_tree("baked", std::move(baked.bvh), 0.0, &baked.refs);
+        std::printf("# baked: %s (%s)\n", file.string().c_str(), baked.info.method.c_str());
+      } else {
+        std::printf("# baked: no %s\n", file.string().c_str());
+      }
     }
     if (opt.optimizers) {
       {
