@@ -16,6 +16,7 @@
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/validate.h"
+#include "optimize/huge_page_backing.h"
 #include "optimize/largest_keys.h"
 #include "optimize/reinsertion_search.h"
 #include "optimize/undo_log.h"
@@ -510,6 +511,20 @@ TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreads) {
     EXPECT_EQ(cost[0], cost[1]);
     EXPECT_EQ(sig[0], sig[1]) << form_name(form);
   }
+}
+
+// The collapse stalls the passes while it runs and pays back over a long run only: started
+// without a time limit and in runs that leave about 20 ms per MB of nodes, not in the 1x
+// budgets of bake --quality fast (4M triangles, 320 MB of nodes: 2.6 s).
+TEST(HugePageBacking, PaysOffOnlyInRunsLongEnough) {
+  using detail::HugePageBacking;
+  const size_t hall_4m = 320'000'000, hall_1m = 80'000'000;
+  EXPECT_TRUE(HugePageBacking::pays_off(hall_4m, 0.0, 0.3));   // no limit
+  EXPECT_FALSE(HugePageBacking::pays_off(hall_4m, 2.6, 0.3));  // 1x the build time
+  EXPECT_TRUE(HugePageBacking::pays_off(hall_4m, 13.0, 0.3));  // 5x
+  EXPECT_FALSE(HugePageBacking::pays_off(hall_1m, 0.54, 0.06));
+  EXPECT_TRUE(HugePageBacking::pays_off(hall_1m, 2.7, 0.06));
+  EXPECT_FALSE(HugePageBacking::pays_off(hall_1m, 2.0, 2.5));  // already past the limit
 }
 
 // A node array of several megabytes, whose whole huge pages the optimizer has collapsed

@@ -11,7 +11,8 @@
 // (--threads): it spends its time in the kernel, about 0.2 s at 1M triangles here, at the
 // lowest priority, so that it takes the time the optimizer's threads leave idle (sequential
 // passes, the serial parts of the parallel ones) rather than theirs: at normal priority the
-// first pass at 1M, on 2 threads, took up to 0.31 s instead of 0.12 s. With the regional
+// first pass at 1M, on 2 threads, took up to 0.31 s instead of 0.12 s. Even so it stalls
+// the passes while it runs, so a run too short to win that back does without (pays_off). With the regional
 // form's passes on every thread it still paid (measured at normal priority: 1M 8.6 s against
 // 9.7 s without it, 4M 43.0 against 44.5 s). Where the kernel cannot do it, or no thread can
 // be started, nothing happens. The tree, and so every result, is the same either way.
@@ -59,15 +60,15 @@ class HugePageBacking {
     stop_.store(true, std::memory_order_relaxed);
     if (worker_.joinable()) worker_.join();
   }
-  // Whether a run that may last `seconds_left` more (0: no limit) gains from the collapse.
-  // While it runs it stalls the optimizer's threads (a page being collapsed cannot be read,
-  // and every attempt flushes the TLBs): 0.27 s at 4M triangles, 320 MB of nodes, about
-  // 0.85 ms per MB. Afterwards the passes take about 5 % less time, so it pays only in runs
-  // that last about 17 ms per MB more: at 4M, not within 1x the build time (2.6 s), where it
-  // cost 0.27 s of passes; at 5x it saved 0.5 s.
-  static bool pays_off(size_t bytes, double seconds_left) {
-    constexpr double kPaysAfterSecondsPerMB = 0.02;
-    return seconds_left == 0.0 || seconds_left >= kPaysAfterSecondsPerMB * (static_cast<double>(bytes) / 1e6);
+  // Whether the collapse pays in a run of `time_limit` seconds (0: none) that has run for
+  // `elapsed`. While it runs it stalls the optimizer's threads (a page being collapsed
+  // cannot be read, and every attempt flushes the TLBs): 0.3 to 0.8 s at 4M triangles, whose
+  // nodes take 320 MB. Afterwards the passes take about 5 % less time, so it pays only where
+  // the run may last about 20 ms per MB of nodes more: at 4M not within 1x the build time
+  // (2.6 s: without it 379.1 there instead of 379.5-379.6), at 5x it does.
+  static bool pays_off(size_t bytes, double time_limit, double elapsed) {
+    constexpr double kSecondsPerMB = 0.02;
+    return time_limit == 0.0 || time_limit - elapsed >= kSecondsPerMB * (static_cast<double>(bytes) / 1e6);
   }
   HugePageBacking(const HugePageBacking&) = delete;
   HugePageBacking& operator=(const HugePageBacking&) = delete;

@@ -681,9 +681,8 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     }
   }
   {
-    const double time_limit = config.limits.time_limit;
-    const bool huge_pages_pay = detail::HugePageBacking::pays_off(
-        bvh.nodes.size() * sizeof(BvhNode), time_limit == 0.0 ? 0.0 : std::max(time_limit - driver.elapsed(), 1e-9));
+    const bool huge_pages_pay = detail::HugePageBacking::pays_off(bvh.nodes.size() * sizeof(BvhNode),
+                                                                  config.limits.time_limit, driver.elapsed());
     std::optional<detail::HugePageBacking> huge_pages;
     for (Stage s : stages_of(config.form, bvh.nodes.size())) {
       // Each stage starts afresh from the tree the last one left (its tracked sums included).
