@@ -183,8 +183,8 @@ class InsertionOptimizer {
   };
   Scope whole_tree() { return {&inner_area_, nullptr, kInvalidNode, &scratch_}; }
 
-  // The undo log holds at most one record per sixteenth of the nodes (2.75 bytes a node,
-  // where a copy of the tree took 40; it keeps the optimizer under 100 bytes a triangle): a
+  // The undo log holds at most one record per sixteenth of the nodes (2.5 bytes a node,
+  // where a copy of the tree took 36; it keeps the optimizer under 100 bytes a triangle): a
   // pass changes about 3 % of them, a stretch of passes without a new best up to a quarter.
   // One move adds at most twice the tree's depth, the slack reserved beyond the limit.
   size_t undo_limit() const { return std::max<size_t>(bvh_.nodes.size() / 16, 64); }
