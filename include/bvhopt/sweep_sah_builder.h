@@ -11,9 +11,9 @@ namespace bvhopt {
 
 // What only the sweep builder has; BuildOptions carries it next to the shared settings.
 struct SweepSahParams {
-  // Nodes with at least this many references sweep their three axes, and partition their
-  // lists, in parallel: the top nodes are long sequential passes otherwise. They hold 8
-  // more bytes per reference of scratch while they do.
+  // Nodes with at least this many references split each axis's sweep, and each list's
+  // partition, into chunks on all threads: the top nodes are long sequential passes
+  // otherwise. The tree is the same either way, and no more scratch is needed.
   uint32_t parallel_split_threshold = 32768;
 };
 

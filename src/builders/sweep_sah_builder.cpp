@@ -1,11 +1,13 @@
 #include "bvhopt/sweep_sah_builder.h"
 
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <bit>
 #include <memory>
+#include <vector>
 
 #include "builders/sah_common.h"
 #include "builders/sorted_range_sweep.h"
@@ -57,17 +59,8 @@ class SweepHeuristic {
 
   size_t split(const detail::NodeRange& r, const BvhNode& node, const Node&, Node& left, Node& right) {
     const size_t count = r.count();
-    // Large nodes work on their three axes at once and need two more scratch arrays
-    // while they do; freed before the children are built.
-    std::unique_ptr<Scratch[]> large;
-    Scratch* extra_storage[2] = {nullptr, nullptr};
-    Scratch** extra = nullptr;
-    if (count >= config_.parallel_split_threshold) {
-      large.reset(new Scratch[2 * count]);
-      extra_storage[0] = large.get();
-      extra_storage[1] = large.get() + count;
-      extra = extra_storage;
-    }
+    // Large nodes split each sweep and each list's partition into chunks on all threads.
+    const bool large = count >= config_.parallel_split_threshold;
 
     Split split;
     if (centroids_coincide(r.begin, count)) {
@@ -79,10 +72,10 @@ class SweepHeuristic {
       Box rr = detail::bounds_of(refs_, ids + split.left_count, count - split.left_count);
       split.cost = l.area() * double(split.left_count) + rr.area() * double(count - split.left_count);
     } else {
-      split = find_split(r.begin, count, extra);
+      split = find_split(r.begin, count, large);
     }
     if (detail::sah_prefers_leaf(config_, node.area(), count, split.cost)) return 0;
-    partition(r.begin, count, split, left.box, right.box, extra);
+    partition(r.begin, count, split, left.box, right.box, large);
     return split.left_count;
   }
 
@@ -128,19 +121,59 @@ class SweepHeuristic {
         count, [&](Box& b, size_t k) { b.extend(boxes[ids[k]]); }, [&](size_t k) -> double& { return suffix[k].area; });
   }
 
-  // Sweeps the node's three sorted lists. Large nodes sweep the three axes at once (each
-  // axis needs its own area scratch then); the per-axis winners are combined by the same
-  // rule, so the split is the same either way.
-  Split find_split(size_t begin, size_t count, Scratch* extra[2]) const {
+  // One axis of a large node's sweep, in chunks on all threads: the same boxes (a union is
+  // exact in any grouping), so the same areas and costs at every position, and the chunks'
+  // winners combined in order by the sequential rule (a later candidate wins only if
+  // strictly better): the very candidate sweep_axis picks. It needs no scratch beyond the
+  // node's own suffix areas; sweeping the three axes at once needed two more arrays, 16
+  // bytes per reference at the root, the build's peak.
+  detail::SweepCandidate sweep_axis_chunked(int a, size_t begin, size_t count, Scratch* suffix) const {
+    constexpr size_t kChunk = 8192;
+    const Box* boxes = refs_.boxes.data();
+    const uint32_t* ids = lists_[a] + begin;
+    const size_t chunks = (count + kChunk - 1) / kChunk;
+    std::vector<Box> before(chunks + 1), after(chunks + 1);  // unions of the chunks before / after c
+    std::vector<Box> own(chunks);
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+      Box b;
+      for (size_t k = c * kChunk, e = std::min(count, k + kChunk); k < e; ++k) b.extend(boxes[ids[k]]);
+      own[c] = b;
+    });
+    for (size_t c = 0; c < chunks; ++c) before[c + 1] = merge(before[c], own[c]);
+    for (size_t c = chunks; c-- > 0;) after[c] = merge(after[c + 1], own[c]);
+    std::vector<detail::SweepCandidate> best(chunks);
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+      const size_t first = c * kChunk, end = std::min(count, first + kChunk);
+      Box right = after[c + 1];
+      for (size_t k = end; k-- > std::max<size_t>(first, 1);) {
+        right.extend(boxes[ids[k]]);
+        suffix[k].area = right.area_unchecked();
+      }
+      Box left = before[c];
+      detail::SweepCandidate& b = best[c];
+      for (size_t k = first; k < end; ++k) {
+        if (k > 0) {
+          const double cost = left.area_unchecked() * double(k) + suffix[k].area * double(count - k);
+          const size_t balance = k * 2 > count ? k * 2 - count : count - k * 2;
+          const detail::SweepCandidate here{k, cost, balance};
+          if (detail::better_candidate(here, b)) b = here;
+        }
+        left.extend(boxes[ids[k]]);
+      }
+    });
+    detail::SweepCandidate winner;
+    for (const detail::SweepCandidate& b : best)
+      if (detail::better_candidate(b, winner)) winner = b;
+    return winner;
+  }
+
+  // Sweeps the node's three sorted lists, one after the other (a large node's in chunks on
+  // all threads); the per-axis winners are combined by the same rule either way.
+  Split find_split(size_t begin, size_t count, bool large) const {
     detail::SweepCandidate best[3];
-    Scratch* suffix[3] = {scratch_.get() + begin, extra ? extra[0] : nullptr, extra ? extra[1] : nullptr};
-    if (extra) {
-      tbb::parallel_invoke([&] { best[0] = sweep_axis(0, begin, count, suffix[0]); },
-                           [&] { best[1] = sweep_axis(1, begin, count, suffix[1]); },
-                           [&] { best[2] = sweep_axis(2, begin, count, suffix[2]); });
-    } else {
-      for (int a = 0; a < 3; ++a) best[a] = sweep_axis(a, begin, count, suffix[0]);
-    }
+    Scratch* suffix = scratch_.get() + begin;
+    for (int a = 0; a < 3; ++a)
+      best[a] = large ? sweep_axis_chunked(a, begin, count, suffix) : sweep_axis(a, begin, count, suffix);
     int winner = 0;
     for (int a = 1; a < 3; ++a)
       if (detail::better_candidate(best[a], best[winner])) winner = a;
@@ -157,12 +190,36 @@ class SweepHeuristic {
     return true;
   }
 
+  // A large node's stable partition of one list, in chunks on all threads: each chunk counts
+  // its left entries, and from the counts before it knows where its entries go in the
+  // partitioned order, which it writes to the scratch; the scratch is then copied back.
+  void stable_partition_chunked(int a, size_t begin, size_t count) {
+    constexpr size_t kChunk = 8192;
+    uint32_t* list = lists_[a] + begin;
+    Scratch* out = scratch_.get() + begin;
+    const uint8_t* is_left = is_left_.get();
+    const size_t chunks = (count + kChunk - 1) / kChunk;
+    std::vector<size_t> lefts(chunks + 1, 0);  // left entries before chunk c (after the scan)
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+      size_t n = 0;
+      for (size_t k = c * kChunk, e = std::min(count, k + kChunk); k < e; ++k) n += is_left[list[k]] != 0;
+      lefts[c + 1] = n;
+    });
+    for (size_t c = 0; c < chunks; ++c) lefts[c + 1] += lefts[c];
+    const size_t total_left = lefts[chunks];
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+      size_t l = lefts[c], r = total_left + c * kChunk - lefts[c];
+      for (size_t k = c * kChunk, e = std::min(count, k + kChunk); k < e; ++k) out[is_left[list[k]] ? l++ : r++].id = list[k];
+    });
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+      for (size_t k = c * kChunk, e = std::min(count, k + kChunk); k < e; ++k) list[k] = out[k].id;
+    });
+  }
+
   // Moves the left references to the front of the other two lists, keeping their sorted
   // order (a stable partition by the per-reference side flag). Returns the child boxes.
-  // With `extra` (large nodes) the two sides are marked, and the two lists partitioned,
-  // at the same time; the second list then spills into extra[0].
-  void partition(size_t begin, size_t count, const Split& split, Box& left_box, Box& right_box,
-                 Scratch* extra[2]) {
+  // Large nodes mark the two sides at the same time and partition each list in chunks.
+  void partition(size_t begin, size_t count, const Split& split, Box& left_box, Box& right_box, bool large) {
     const Box* boxes = refs_.boxes.data();
     uint8_t* is_left = is_left_.get();
     const uint32_t* ids = lists_[split.axis] + begin;
@@ -178,11 +235,11 @@ class SweepHeuristic {
           [&](size_t k) -> uint32_t& { return spill[k].id; });
     };
     const int a1 = split.axis == 0 ? 1 : 0, a2 = split.axis == 2 ? 1 : 2;
-    if (extra) {
+    if (large) {
       tbb::parallel_invoke([&] { mark(0, split.left_count, 1, left_box); },
                            [&] { mark(split.left_count, count, 0, right_box); });
-      tbb::parallel_invoke([&] { stable_partition(a1, scratch_.get() + begin); },
-                           [&] { stable_partition(a2, extra[0]); });
+      stable_partition_chunked(a1, begin, count);
+      stable_partition_chunked(a2, begin, count);
     } else {
       mark(0, split.left_count, 1, left_box);
       mark(split.left_count, count, 0, right_box);
