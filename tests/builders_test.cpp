@@ -274,6 +274,41 @@ TEST(Builders, SweepEqualsBruteForceSweep) {
   }
 }
 
+// The sweep's top nodes sweep and partition in chunks of 8192 positions on all threads; with
+// tens of thousands of references there are several chunks per node, and the tree must be
+// the one the sequential sweep builds, ties included (duplicated boxes).
+TEST(Builders, SweepInChunksBuildsTheSequentialTree) {
+  // Unit boxes in a row: every split k costs what n - k costs, so an odd row ties exactly at
+  // its middle and the tie rule (the earlier of two equally balanced) decides: inside a
+  // chunk for 40001 boxes, across the boundary of the second and third chunk for 32767.
+  auto row = [](int n) {
+    std::vector<Box> boxes;
+    for (int i = 0; i < n; ++i) boxes.push_back(Box(Vec3(float(i), 0.0f, 0.0f), Vec3(float(i) + 1.0f, 1.0f, 1.0f)));
+    return make_references(boxes);
+  };
+  for (uint32_t max_leaf : {1u, 4u}) {
+    for (uint64_t seed : {1u, 2u, 3u, 4u}) {
+      PrimitiveRefs refs = seed == 1   ? make_references(random_mesh(50000, 7, true))
+                           : seed == 2 ? random_refs(50000, 8)
+                           : seed == 3 ? row(40001)
+                                       : row(32767);
+      if (seed < 3)
+        for (size_t i = 0; i + 3 < refs.size(); i += 4) {
+          refs.boxes[i + 1] = refs.boxes[i];
+          refs.centroids[i + 1] = refs.centroids[i];
+        }
+      SweepSahConfig sequential;
+      sequential.leaf.max_leaf_size = max_leaf;
+      sequential.parallel_split_threshold = std::numeric_limits<uint32_t>::max();
+      SweepSahConfig chunked = sequential;
+      chunked.parallel_split_threshold = 64;
+      EXPECT_EQ(tree_signature(build_sweep_sah(refs, chunked), refs),
+                tree_signature(build_sweep_sah(refs, sequential), refs))
+          << "seed " << seed << " leaf " << max_leaf;
+    }
+  }
+}
+
 TEST(Builders, SameTreeOnOneAndTwoThreads) {
   for (BuilderKind kind : all_builders()) {
     for (uint32_t max_leaf : {1u, 4u}) {
