@@ -12,10 +12,11 @@
 // lowest priority, so that it takes the time the optimizer's threads leave idle (sequential
 // passes, the serial parts of the parallel ones) rather than theirs: at normal priority the
 // first pass at 1M, on 2 threads, took up to 0.31 s instead of 0.12 s. Even so it stalls
-// the passes while it runs, so a run too short to win that back does without (pays_off). With the regional
-// form's passes on every thread it still paid (measured at normal priority: 1M 8.6 s against
-// 9.7 s without it, 4M 43.0 against 44.5 s). Where the kernel cannot do it, or no thread can
-// be started, nothing happens. The tree, and so every result, is the same either way.
+// the passes while it runs, so a run too short to win that back does without (pays_off).
+// With the regional form's passes on every thread it still paid (measured at normal
+// priority: 1M 8.6 s against 9.7 s without it, 4M 43.0 against 44.5 s). Where the kernel
+// cannot do it, or no thread can be started, nothing happens. The tree, and so every
+// result, is the same either way.
 #pragma once
 
 #include <atomic>
