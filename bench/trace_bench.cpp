@@ -24,7 +24,9 @@
 // collapse, the collapse with c_blk = 0.7, 1 and 1.5 (c_node = 1; to recalibrate the
 // default 1 : 0.5 on another CPU), every ISA the CPU has, and 1 and 2 rays traced side by
 // side. --fit-costs prints, per row, the wide tracer's nodes and blocks per ray beside its
-// ns/ray, the data the wide cost model is calibrated from.
+// ns/ray, the data the wide cost model is calibrated from. The run ends with each wide
+// tree's geometric mean ratio to Embree MEDIUM over every scene and ray set, per ray set
+// too, and the number of pairs where it is at least 1.
 //
 // Every figure is the median of R timed passes; the candidates are timed round-robin within
 // each repeat so machine load drifts alike over all of them. Ratios are ours / Embree's.
@@ -409,6 +411,46 @@ nlohmann::json wide_rows(const std::vector<WideTree>& wide, const std::vector<Ra
   return rows;
 }
 
+// The summary of the wide rows over every scene and ray set of the run: per tree
+// (best-bvh8, baked-bvh8, ...), the geometric mean of its ratio to Embree MEDIUM, per ray set
+// and over all, and on how many pairs it is at least 1.
+void print_wide_summary(const nlohmann::json& rows) {
+  struct Tally {
+    double log_sum = 0.0;
+    size_t pairs = 0, at_least_one = 0;
+    std::vector<std::pair<std::string, std::pair<double, size_t>>> per_kind;  // kind -> (log sum, pairs)
+  };
+  std::vector<std::pair<std::string, Tally>> trees;  // in the order first met
+  for (const auto& row : rows) {
+    if (!row.contains("wide")) continue;
+    const std::string kind = row["rays"];
+    for (const auto& w : row["wide"]) {
+      const double ratio = w["ratio_1t"];
+      if (ratio <= 0.0) continue;  // no Embree figure
+      const std::string name = w["tree"];
+      auto it = std::find_if(trees.begin(), trees.end(), [&](const auto& t) { return t.first == name; });
+      if (it == trees.end()) it = trees.insert(trees.end(), {name, Tally{}});
+      Tally& t = it->second;
+      t.log_sum += std::log(ratio);
+      ++t.pairs;
+      t.at_least_one += ratio >= 1.0;
+      auto k = std::find_if(t.per_kind.begin(), t.per_kind.end(), [&](const auto& e) { return e.first == kind; });
+      if (k == t.per_kind.end()) k = t.per_kind.insert(t.per_kind.end(), {kind, {0.0, 0}});
+      k->second.first += std::log(ratio);
+      ++k->second.second;
+    }
+  }
+  if (trees.empty()) return;
+  std::printf("\n## Wide trees against Embree MEDIUM over the run (1 thread): geometric mean of the ratio\n");
+  for (const auto& [name, t] : trees) {
+    std::printf("%-20s %.3f over %zu pairs (", name.c_str(), std::exp(t.log_sum / double(t.pairs)), t.pairs);
+    for (size_t i = 0; i < t.per_kind.size(); ++i)
+      std::printf("%s%s %.3f", i ? ", " : "", t.per_kind[i].first.c_str(),
+                  std::exp(t.per_kind[i].second.first / double(t.per_kind[i].second.second)));
+    std::printf("); at least 1 on %zu\n", t.at_least_one);
+  }
+}
+
 int run(const Options& opt) {
   using nlohmann::json;
   json out = json::array();
@@ -652,6 +694,7 @@ int run(const Options& opt) {
       std::fflush(stdout);
     }
   }
+  print_wide_summary(out);
   if (!opt.json_path.empty()) write_json(opt.json_path, out);
   return 0;
 }
