@@ -121,6 +121,11 @@ class SweepHeuristic {
         count, [&](Box& b, size_t k) { b.extend(boxes[ids[k]]); }, [&](size_t k) -> double& { return suffix[k].area; });
   }
 
+  // The positions of a large node's sweeps and partitions go to threads in chunks of this
+  // many; fixed, so that the work, and any grouping, never depends on the thread count.
+  static constexpr size_t kChunk = 8192;
+  static size_t chunks_of(size_t count) { return (count + kChunk - 1) / kChunk; }
+
   // One axis of a large node's sweep, in chunks on all threads: the same boxes (a union is
   // exact in any grouping), so the same areas and costs at every position, and the chunks'
   // winners combined in order by the sequential rule (a later candidate wins only if
@@ -128,10 +133,9 @@ class SweepHeuristic {
   // node's own suffix areas; sweeping the three axes at once needed two more arrays, 16
   // bytes per reference at the root, the build's peak.
   detail::SweepCandidate sweep_axis_chunked(int a, size_t begin, size_t count, Scratch* suffix) const {
-    constexpr size_t kChunk = 8192;
     const Box* boxes = refs_.boxes.data();
     const uint32_t* ids = lists_[a] + begin;
-    const size_t chunks = (count + kChunk - 1) / kChunk;
+    const size_t chunks = chunks_of(count);
     std::vector<Box> before(chunks + 1), after(chunks + 1);  // unions of the chunks before / after c
     std::vector<Box> own(chunks);
     tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
@@ -194,11 +198,10 @@ class SweepHeuristic {
   // its left entries, and from the counts before it knows where its entries go in the
   // partitioned order, which it writes to the scratch; the scratch is then copied back.
   void stable_partition_chunked(int a, size_t begin, size_t count) {
-    constexpr size_t kChunk = 8192;
     uint32_t* list = lists_[a] + begin;
     Scratch* out = scratch_.get() + begin;
     const uint8_t* is_left = is_left_.get();
-    const size_t chunks = (count + kChunk - 1) / kChunk;
+    const size_t chunks = chunks_of(count);
     std::vector<size_t> lefts(chunks + 1, 0);  // left entries before chunk c (after the scan)
     tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
       size_t n = 0;
