@@ -181,12 +181,24 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOptio
   progress.update("building " + std::to_string(mesh.triangle_count()) + " triangles" + label, true);
   const CostModel cost = opt.cost.model();
   Stopwatch build_clock;
-  BuiltTree built = builder.build(mesh, make_references(mesh), cost, spec.leaf_size);
-  s.bvh = std::move(built.bvh);
-  s.refs = std::move(built.refs);
-  s.references = s.refs.size();
-  s.build_seconds = build_clock.seconds();
-  s.cost_built = sah_cost(s.bvh, s.refs, cost);
+  if (builder.name == "sweep" && spec.leaf_size == 1) {
+    // Over the mesh itself, with no references beside the tree: the same tree, at 93 bytes
+    // a triangle instead of 133 (build_sweep_sah(const Mesh&)). The references are made
+    // when the collapse needs them.
+    BuildOptions options;
+    options.cost = cost;
+    s.bvh = build_sweep_sah(mesh, sweep_sah_config(options));
+    s.references = mesh.triangle_count();
+    s.build_seconds = build_clock.seconds();
+    s.cost_built = sah_cost(s.bvh, cost);  // one triangle a leaf: nothing counted twice
+  } else {
+    BuiltTree built = builder.build(mesh, make_references(mesh), cost, spec.leaf_size);
+    s.bvh = std::move(built.bvh);
+    s.refs = std::move(built.refs);
+    s.references = s.refs.size();
+    s.build_seconds = build_clock.seconds();
+    s.cost_built = sah_cost(s.bvh, s.refs, cost);
+  }
 
   const std::string& text = opt.time_budget;
   const bool in_seconds = !text.empty() && text.back() != 'x' && text.back() != 'X';
@@ -208,7 +220,7 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOptio
   // The optimizer needs only the tree: one reference per triangle (40 bytes a triangle) is
   // dropped while it runs and made again, the same, for the collapse and the file. Split
   // references (sbvh) are the builder's own and stay.
-  const bool remade = s.refs.size() == mesh.triangle_count() && builder.name != "sbvh";
+  const bool remade = (s.refs.empty() || s.refs.size() == mesh.triangle_count()) && builder.name != "sbvh";
   if (remade) s.refs = PrimitiveRefs{};
   s.report = optimize_insertion(s.bvh, insertion);
   if (remade) s.refs = make_references(mesh);

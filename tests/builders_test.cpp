@@ -309,6 +309,49 @@ TEST(Builders, SweepInChunksBuildsTheSequentialTree) {
   }
 }
 
+// The sweep over a mesh with its leaves in place must be the sweep over make_references,
+// node for node: the same boxes, parents, children and leaf slots at the same indices.
+TEST(Builders, SweepOverAMeshBuildsTheTreeOfItsReferences) {
+  auto same_nodes = [](const Bvh& a, const Bvh& b) {
+    if (a.root != b.root || a.nodes.size() != b.nodes.size() || a.ref_indices != b.ref_indices) return false;
+    for (size_t i = 0; i < a.nodes.size(); ++i) {
+      const BvhNode &x = a.nodes[i], &y = b.nodes[i];
+      if (!(x.box == y.box) || x.parent != y.parent || x.left_or_first != y.left_or_first ||
+          x.right_or_count != y.right_or_count)
+        return false;
+    }
+    return true;
+  };
+  Mesh same;  // ten copies of one triangle: every centroid coincides, so nodes are halved
+  same.positions = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  for (int i = 0; i < 10; ++i) same.add_triangle(0, 1, 2);
+  Mesh pairs = random_mesh(20000, 5, true);  // every fourth triangle repeated: ties between centroids
+  for (size_t t = 0; t + 3 < pairs.triangle_count(); t += 4)
+    for (int k = 0; k < 3; ++k) pairs.indices[3 * (t + 1) + k] = pairs.indices[3 * t + k];
+  const std::vector<Mesh> meshes = {random_mesh(1, 1), random_mesh(2, 2), random_mesh(3, 3), same,
+                                    random_mesh(5000, 4, true), pairs};
+  for (size_t m = 0; m < meshes.size(); ++m) {
+    const PrimitiveRefs refs = make_references(meshes[m]);
+    for (uint32_t max_leaf : {1u, 4u, 8u}) {
+      for (uint32_t chunked_from : {64u, std::numeric_limits<uint32_t>::max()}) {
+        SweepSahConfig config;
+        config.leaf.max_leaf_size = max_leaf;
+        config.parallel_split_threshold = chunked_from;
+        config.parallel_threshold = 32;
+        const Bvh expected = build_sweep_sah(refs, config);
+        for (int threads : {1, 2}) {
+          tbb::global_control gc(tbb::global_control::max_allowed_parallelism, threads);
+          const Bvh in_place = build_sweep_sah(meshes[m], config);
+          EXPECT_TRUE(same_nodes(in_place, expected))
+              << "mesh " << m << " leaf " << max_leaf << " chunks from " << chunked_from << " threads " << threads;
+          EXPECT_TRUE(validate(in_place, refs).ok()) << "mesh " << m << " leaf " << max_leaf;
+        }
+      }
+    }
+  }
+  EXPECT_TRUE(build_sweep_sah(Mesh{}).empty());
+}
+
 TEST(Builders, SameTreeOnOneAndTwoThreads) {
   for (BuilderKind kind : all_builders()) {
     for (uint32_t max_leaf : {1u, 4u}) {
