@@ -57,18 +57,12 @@ double sah_cost(const Bvh& bvh, const CostModel& model) {
   return c;
 }
 
-CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size) {
-  std::vector<uint64_t> count(bvh.nodes.size(), 0);
-  if (!bvh.empty())
-    for (uint32_t n : bvh.post_order()) {
-      const BvhNode& nd = bvh[n];
-      count[n] = nd.is_leaf() ? nd.ref_count() : count[nd.left()] + count[nd.right()];
-    }
-  return collapse_costs(bvh, model, max_leaf_size, count);
-}
+namespace {
 
-CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size,
-                             const std::vector<uint64_t>& count) {
+// The collapse's dynamic program in post order; count(n) gives the references under n, once
+// per node, children before parents.
+template <class Count>
+CollapseCosts collapse_costs_by(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size, Count&& count) {
   CollapseCosts out;
   out.best.assign(bvh.nodes.size(), 0.0);
   out.collapse.assign(bvh.nodes.size(), 0);
@@ -76,17 +70,35 @@ CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t ma
   const CostWeights w(bvh);
   for (uint32_t n : bvh.post_order()) {
     const BvhNode& nd = bvh[n];
+    const uint64_t c = count(n);
     if (nd.is_leaf()) {
-      out.best[n] = leaf_cost(w(nd), static_cast<uint32_t>(count[n]), model);
+      out.best[n] = leaf_cost(w(nd), static_cast<uint32_t>(c), model);
       continue;
     }
     const double as_tree = model.traversal * w(nd) + out.best[nd.left()] + out.best[nd.right()];
-    const bool may_collapse = max_leaf_size == 0 || count[n] <= max_leaf_size;
-    const double as_leaf = model.intersection * w(nd) * static_cast<double>(count[n]);
+    const bool may_collapse = max_leaf_size == 0 || c <= max_leaf_size;
+    const double as_leaf = model.intersection * w(nd) * static_cast<double>(c);
     out.collapse[n] = may_collapse && as_leaf <= as_tree;
     out.best[n] = out.collapse[n] ? as_leaf : as_tree;
   }
   return out;
+}
+
+}  // namespace
+
+CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size) {
+  // Counted in the same walk, in 32 bits (a tree holds at most 2^30 references): no array of
+  // 64-bit counts beside the costs, which had made the collapse bake's peak of memory.
+  std::vector<uint32_t> count(bvh.nodes.size(), 0);
+  return collapse_costs_by(bvh, model, max_leaf_size, [&](uint32_t n) {
+    const BvhNode& nd = bvh[n];
+    return count[n] = nd.is_leaf() ? nd.ref_count() : count[nd.left()] + count[nd.right()];
+  });
+}
+
+CollapseCosts collapse_costs(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size,
+                             const std::vector<uint64_t>& count) {
+  return collapse_costs_by(bvh, model, max_leaf_size, [&](uint32_t n) { return count[n]; });
 }
 
 double optimal_collapse_cost(const Bvh& bvh, const CostModel& model, uint32_t max_leaf_size) {
