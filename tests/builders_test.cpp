@@ -328,8 +328,22 @@ TEST(Builders, SweepOverAMeshBuildsTheTreeOfItsReferences) {
   Mesh pairs = random_mesh(20000, 5, true);  // every fourth triangle repeated: ties between centroids
   for (size_t t = 0; t + 3 < pairs.triangle_count(); t += 4)
     for (int k = 0; k < 3; ++k) pairs.indices[3 * (t + 1) + k] = pairs.indices[3 * t + k];
+  // Coordinates that are not finite (loaded scenes refuse them; a mesh made by hand may
+  // hold them): a NaN, an infinity.
+  Mesh nan = random_mesh(300, 6), inf = random_mesh(300, 7);
+  nan.positions[40] = std::numeric_limits<float>::quiet_NaN();
+  inf.positions[41] = std::numeric_limits<float>::infinity();
+  // Whole triangles of NaN and of +infinity: a box of +infinity has extents inf - inf, so
+  // no split of a node holding it has a cost, and the reference path keeps such a node as
+  // one leaf.
+  for (Mesh* m : {&nan, &inf}) {
+    const uint32_t v = static_cast<uint32_t>(m->positions.size() / 3);
+    const float x = m == &nan ? std::numeric_limits<float>::quiet_NaN() : std::numeric_limits<float>::infinity();
+    for (int k = 0; k < 9; ++k) m->positions.push_back(x);
+    m->add_triangle(v, v + 1, v + 2);
+  }
   const std::vector<Mesh> meshes = {random_mesh(1, 1), random_mesh(2, 2), random_mesh(3, 3), same,
-                                    random_mesh(5000, 4, true), pairs};
+                                    random_mesh(5000, 4, true), pairs, nan, inf};
   for (size_t m = 0; m < meshes.size(); ++m) {
     const PrimitiveRefs refs = make_references(meshes[m]);
     for (uint32_t max_leaf : {1u, 4u, 8u}) {
@@ -344,7 +358,7 @@ TEST(Builders, SweepOverAMeshBuildsTheTreeOfItsReferences) {
           const Bvh in_place = build_sweep_sah(meshes[m], config);
           EXPECT_TRUE(same_nodes(in_place, expected))
               << "mesh " << m << " leaf " << max_leaf << " chunks from " << chunked_from << " threads " << threads;
-          EXPECT_TRUE(validate(in_place, refs).ok()) << "mesh " << m << " leaf " << max_leaf;
+          if (m < 6) EXPECT_TRUE(validate(in_place, refs).ok()) << "mesh " << m << " leaf " << max_leaf;
         }
       }
     }

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cstddef>
 #include <memory>
 #include <new>
@@ -319,6 +320,16 @@ class SweepHeuristic {
   std::unique_ptr<Scratch[]> scratch_;     // per position
 };
 
+bool all_finite(const std::vector<float>& values) {
+  return tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(0, values.size(), 65536), true,
+      [&](const tbb::blocked_range<size_t>& r, bool ok) {
+        for (size_t i = r.begin(); i < r.end(); ++i) ok &= std::isfinite(values[i]);
+        return ok;
+      },
+      [](bool a, bool b) { return a && b; });
+}
+
 }  // namespace
 
 Bvh build_sweep_sah(const PrimitiveRefs& refs, const SweepSahConfig& config) {
@@ -335,8 +346,10 @@ Bvh build_sweep_sah(const Mesh& mesh, const SweepSahConfig& config) {
   Bvh bvh;
   if (mesh.triangle_count() == 0) return bvh;
   check_reference_count(mesh.triangle_count(), "sweep SAH builder");
-  // Leaves of several references need their nodes while the boxes are still in use.
-  if (config.leaf.max_leaf_size > 1) return build_sweep_sah(make_references(mesh), config);
+  // Leaves of several references need their nodes while the boxes are still in use; and a
+  // coordinate that is not finite (a mesh made by hand: loaded scenes refuse them) can make
+  // a node that no split separates, which only the reference path can keep as one leaf.
+  if (config.leaf.max_leaf_size > 1 || !all_finite(mesh.positions)) return build_sweep_sah(make_references(mesh), config);
   SweepHeuristic<true>(mesh, config, bvh).run();
   return bvh;
 }
