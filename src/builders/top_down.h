@@ -59,9 +59,10 @@ class TopDownTree {
   explicit TopDownTree(Bvh& bvh) : bvh_(bvh) {}
 
   // Leaves in place, for leaves of one reference: the caller keeps the references' boxes
-  // inside the node array, in the places of the last n - 1 / 3 or so nodes, so that a build
-  // over one reference per triangle needs no array of boxes beside the tree (24 bytes per
-  // reference, a quarter of the sweep builder's peak). The tree is numbered as without
+  // inside the node array, in its last 24 n bytes, which no inner node reaches while the
+  // tree grows, so that a build over one reference per triangle needs no array of boxes
+  // beside the tree (24 bytes per reference, a quarter of the sweep builder's peak). The
+  // tree is numbered as without
   // (links name the nodes' places in that numbering), but only inner nodes are written
   // while it grows, and elsewhere: in [0, n - 1), where the subtree over [begin, end)
   // takes [slot, slot + (end - begin) - 1), its left child over [begin, mid) from slot + 1,
@@ -135,10 +136,10 @@ class TopDownTree {
   }
 
  private:
-  // Leaves of one: inner node s goes to its place p(s) >= s, and the places rise with s (the
-  // inner nodes are numbered in depth-first order), so moving them last first never
-  // overwrites one not yet moved. Between p(s) and p(s + 1) lie the leaves of the slots that
-  // follow, in slot order.
+  // Leaves of one: inner node s goes to its place p(s) = s + the leaves before it >= s, and
+  // the places rise with s (the inner nodes are numbered in depth-first order), so moving
+  // them last first never overwrites one not yet moved: one pass, streaming. Between p(s)
+  // and p(s + 1) lie the leaves of the slots that follow, in slot order.
   void place_complete_tree() {
     std::vector<BvhNode>& nodes = bvh_.nodes;
     const uint32_t total = static_cast<uint32_t>(nodes.size()), inner = total / 2;
