@@ -221,8 +221,8 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOptio
   // dropped while it runs. Nothing is counted twice then, so the costs and the collapse
   // need no references either: they are made again, the same, for the file only, once the
   // collapse has freed its scratch and the tree has shrunk to its nodes in use (bake's peak
-  // had been the collapse, with the references made again beside it: 192 bytes a
-  // triangle at 2M and 10M). Split references (sbvh) are the builder's own and stay.
+  // had been the collapse, with the references made again beside it: about 190 bytes
+  // a triangle at 2M and 10M). Split references (sbvh) are the builder's own and stay.
   const bool remade = (s.refs.empty() || s.refs.size() == mesh.triangle_count()) && builder.name != "sbvh";
   if (remade) s.refs = PrimitiveRefs{};
   s.report = optimize_insertion(s.bvh, insertion);
