@@ -8,6 +8,7 @@
 // run_method.
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -19,6 +20,7 @@
 #include "bvhopt/insertion_optimizer.h"
 #include "bvhopt/optimizer_method.h"
 #include "bvhopt/references.h"
+#include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/triangle_cost.h"
 #include "bvhopt/tree_rotations.h"
 #include "cli_common.h"
@@ -142,6 +144,10 @@ OptimizeReport run_method(Bvh& bvh, OptimizerMethod method, const OptimizeOption
 struct Loaded {
   Bvh bvh;
   PrimitiveRefs refs;
+  // A scene built by the sweep over its mesh (no subdivision): the references are made from
+  // it, the same, once the optimizer is done, for the file. The optimizers need only the
+  // tree; the mesh costs about half what the references would while they run.
+  std::optional<Mesh> mesh;
   BvhFileInfo info;
   double load_seconds = 0.0;
   double build_seconds = 0.0;  // 0 for a BVH file
@@ -166,6 +172,16 @@ Loaded load_input(const SceneOption& scene, const EvhOption& evh, const SceneBui
   Mesh mesh = scene.load();
   in.load_seconds = clock.seconds();
   Stopwatch build_clock;
+  if (builder.name == "sweep" && !evh.enabled) {
+    // The same tree as from references, at 93 bytes a triangle instead of 133.
+    BuildOptions options;
+    options.cost = cost;
+    in.bvh = build_sweep_sah(mesh, sweep_sah_config(options));
+    in.build_seconds = build_clock.seconds();
+    in.info = scene_info(mesh, cost, builder.name);
+    in.mesh = std::move(mesh);
+    return in;
+  }
   BuiltTree built = builder.build(mesh, evh.make_refs(mesh), cost);
   in.bvh = std::move(built.bvh);
   in.refs = std::move(built.refs);
@@ -252,6 +268,10 @@ void run_optimize(const OptimizeOptions& opt) {
   OptimizeReport report = run_method(in.bvh, *method, opt, shared);
   progress.finish();
 
+  if (in.mesh) {
+    in.refs = make_references(*in.mesh);
+    in.mesh.reset();
+  }
   BvhFileInfo info = in.info;
   info.method = (info.method.empty() ? std::string("unknown") : info.method) + "+" + opt.method;
   // Both outputs or neither.
