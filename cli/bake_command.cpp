@@ -184,7 +184,7 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOptio
   if (builder.name == "sweep" && spec.leaf_size == 1) {
     // Over the mesh itself, with no references beside the tree: the same tree, at 93 bytes
     // a triangle instead of 133 (build_sweep_sah(const Mesh&)). The references are made
-    // when the collapse needs them.
+    // for the file, after the collapse (below).
     BuildOptions options;
     options.cost = cost;
     s.bvh = build_sweep_sah(mesh, sweep_sah_config(options));
@@ -236,11 +236,11 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOptio
   collapse.max_leaf_size = opt.max_leaf_size;
   // With split references a leaf keeps each triangle once and the cost counts triangles.
   const CollapseResult c = remade ? collapse_leaves(s.bvh, collapse) : collapse_leaves(s.bvh, s.refs, collapse);
+  s.collapse_seconds = collapse_clock.seconds();
   if (remade) {
     s.bvh.nodes.shrink_to_fit();
     s.refs = make_references(mesh);
   }
-  s.collapse_seconds = collapse_clock.seconds();
   s.cost_final = c.cost_after;
   s.leaves = c.leaves_after;
   return s;
