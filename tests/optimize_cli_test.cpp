@@ -95,6 +95,29 @@ TEST_F(OptimizeCli, SameSeedSameFileOnOneAndTwoThreads) {
   EXPECT_EQ(fa.bvh.ref_indices, fb.bvh.ref_indices);  // compacted depth-first: same tree, same order
 }
 
+// A scene is built over its mesh, without references (build_sweep_sah(const Mesh&)), and its
+// references are made only for the file: the file must be the one that building first and
+// optimizing the built file gives.
+TEST_F(OptimizeCli, SceneInputGivesTheFileOfBuildThenOptimize) {
+  const fs::path built = dir_ / "built.bvh", from_file = dir_ / "f.bvh", from_scene = dir_ / "s.bvh";
+  const std::string scene = "'builtin:atrium?triangles=5000'";
+  ASSERT_EQ(run("build " + scene + " -o " + built.string()), 0);
+  ASSERT_EQ(run("optimize " + built.string() + " --threads 2 -o " + from_file.string()), 0);
+  ASSERT_EQ(run("optimize " + scene + " --threads 2 -o " + from_scene.string()), 0);
+  const BvhFile f = read_bvh_file(from_file), s = read_bvh_file(from_scene);
+  ASSERT_EQ(f.bvh.nodes.size(), s.bvh.nodes.size());
+  for (size_t i = 0; i < f.bvh.nodes.size(); ++i) {
+    const BvhNode &a = f.bvh.nodes[i], &b = s.bvh.nodes[i];
+    ASSERT_TRUE(a.box == b.box && a.parent == b.parent && a.left_or_first == b.left_or_first &&
+                a.right_or_count == b.right_or_count)
+        << "node " << i;
+  }
+  EXPECT_EQ(f.bvh.ref_indices, s.bvh.ref_indices);
+  EXPECT_EQ(f.refs.triangle_ids, s.refs.triangle_ids);
+  EXPECT_EQ(f.refs.boxes, s.refs.boxes);
+  EXPECT_EQ(f.info.method, s.info.method);
+}
+
 TEST_F(OptimizeCli, DefaultMethodIsInsertionAndTimeBudgetStopsOnTheBestTree) {
   const fs::path a = dir_ / "a.bvh";
   std::string out, err;
