@@ -12,11 +12,11 @@
 // --time-budget 1x and 5x run: those leave out the huge-page collapse where it would not pay
 // back, so they can end lower) and its share of the converged gain (sweep cost ->
 // converged cost, ours; with --reference, also of a given converged cost, e.g. the issue's
-// 357.00 at 4M); the converged cost and time; the
-// peak heap while building and while optimizing, less the mesh, per triangle. The optimizer
-// runs as bake runs it: the references are dropped first (it needs only the tree), so its
-// peak is tree + leaf slots + scratch. Heap figures count every operator new of the process
-// (this program replaces it); the process's peak RSS is printed too.
+// 357.00 at 4M); the converged cost and time; the peak heap while building and while
+// optimizing, less the mesh, per triangle. The optimizer runs as bake runs it: the
+// references are dropped first (it needs only the tree), so its peak is tree + leaf slots +
+// scratch. Heap figures count every operator new of the process (this program replaces it);
+// the process's peak RSS is printed too.
 //
 // Times are wall seconds of one run on a shared machine: the targets are ratios to the build
 // time measured in the same run, and the growth from the smallest to the largest built-in
@@ -169,8 +169,8 @@ Row run_scene(const std::string& spec, const Options& opt) {
   SweepSahConfig sweep;
   sweep.leaf.max_leaf_size = 1;
   Bvh bvh;
-  // As bake builds with the sweep builder: over the mesh itself, each triangle's box put
-  // straight into its leaf node, with no array of references beside the tree.
+  // As bake builds with the sweep builder: over the mesh itself, the triangles' boxes kept
+  // inside the node array, with no array of references beside the tree.
   row.build_s = seconds_of([&] { bvh = build_sweep_sah(mesh, sweep); });
   row.build_bytes_per_tri = static_cast<double>(g_peak.load() - mesh_bytes) / tris;
   row.sweep_cost = sah_cost(bvh, CostModel{});

@@ -114,9 +114,8 @@ class SweepHeuristic {
       split.axis = 0;
       split.left_count = count / 2;
       const uint32_t* ids = lists_[0] + r.begin;
-      Box l, rr;
-      for (size_t k = 0; k < split.left_count; ++k) l.extend(boxes_[ids[k]]);
-      for (size_t k = split.left_count; k < count; ++k) rr.extend(boxes_[ids[k]]);
+      Box l = detail::bounds_of(boxes_, ids, split.left_count);
+      Box rr = detail::bounds_of(boxes_, ids + split.left_count, count - split.left_count);
       split.cost = l.area() * double(split.left_count) + rr.area() * double(count - split.left_count);
     } else {
       split = find_split(r.begin, count, large);

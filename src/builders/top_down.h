@@ -29,10 +29,14 @@ struct NodeRange {
   size_t count() const { return end - begin; }
 };
 
-inline Box bounds_of(const PrimitiveRefs& refs, const uint32_t* ids, size_t count) {
+inline Box bounds_of(const Box* boxes, const uint32_t* ids, size_t count) {
   Box b;
-  for (size_t i = 0; i < count; ++i) b.extend(refs.boxes[ids[i]]);
+  for (size_t i = 0; i < count; ++i) b.extend(boxes[ids[i]]);
   return b;
+}
+
+inline Box bounds_of(const PrimitiveRefs& refs, const uint32_t* ids, size_t count) {
+  return bounds_of(refs.boxes.data(), ids, count);
 }
 
 inline Box centroid_bounds_of(const PrimitiveRefs& refs, const uint32_t* ids, size_t count) {

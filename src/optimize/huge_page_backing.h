@@ -64,7 +64,7 @@ class HugePageBacking {
   // Whether the collapse pays in a run of `time_limit` seconds (0: none) that has run for
   // `elapsed`. While it runs it stalls the optimizer's threads (a page being collapsed
   // cannot be read, and every attempt flushes the TLBs): 0.3 to 0.8 s at 4M triangles, whose
-  // nodes take 320 MB. Afterwards the passes take about 5 % less time, so it pays only where
+  // nodes take 288 MB. Afterwards the passes take about 5 % less time, so it pays only where
   // the run may last about 20 ms per MB of nodes more: at 4M not within 1x the build time
   // (2.6 s: without it 379.1 there instead of 379.5-379.6), at 5x it does.
   static bool pays_off(size_t bytes, double time_limit, double elapsed) {
