@@ -314,6 +314,34 @@ TEST(ValidateOptions, DroppedDuplicatesAcceptedOnlyWhereTheTriangleRemains) {
 namespace bvhopt {
 namespace {
 
+// The plain copy of a tree's reachable nodes in depth-first order, leaf slots in that order.
+Bvh depth_first_copy(const Bvh& tree) {
+  Bvh expected;
+  std::vector<uint32_t> order = tree.depth_first_order();
+  std::vector<uint32_t> index(tree.nodes.size(), kInvalidNode);
+  for (uint32_t i = 0; i < order.size(); ++i) index[order[i]] = i;
+  for (uint32_t n : order) {
+    BvhNode nd = tree.nodes[n];
+    if (nd.parent != kInvalidNode) nd.parent = index[nd.parent];
+    if (nd.is_leaf()) {
+      const uint32_t first = static_cast<uint32_t>(expected.ref_indices.size());
+      for (uint32_t k = 0; k < nd.ref_count(); ++k) expected.ref_indices.push_back(tree.ref_indices[nd.first_ref() + k]);
+      nd.make_leaf(first, nd.ref_count());
+    } else {
+      nd.make_inner(index[nd.left()], index[nd.right()]);
+    }
+    expected.nodes.push_back(nd);
+  }
+  return expected;
+}
+
+void expect_same_tree(const Bvh& got, const Bvh& want) {
+  ASSERT_EQ(got.root, 0u);
+  ASSERT_EQ(got.nodes.size(), want.nodes.size());
+  ASSERT_EQ(0, std::memcmp(got.nodes.data(), want.nodes.data(), want.nodes.size() * sizeof(BvhNode)));
+  ASSERT_EQ(got.ref_indices, want.ref_indices);
+}
+
 // renumber_depth_first works in place (cycles of swaps); it must give exactly what the plain
 // copy in depth-first order gives, also with unreachable nodes to drop.
 TEST(Renumber, InPlaceEqualsACopyInDepthFirstOrder) {
@@ -354,28 +382,69 @@ TEST(Renumber, InPlaceEqualsACopyInDepthFirstOrder) {
     }
     shuffled.root = perm[bvh.root];
     if (trial % 2 == 1) shuffled.nodes.push_back(BvhNode{});  // unreachable
-    Bvh expected;
-    std::vector<uint32_t> order = shuffled.depth_first_order();
-    std::vector<uint32_t> index(shuffled.nodes.size(), kInvalidNode);
-    for (uint32_t i = 0; i < order.size(); ++i) index[order[i]] = i;
-    for (uint32_t n : order) {
-      BvhNode nd = shuffled.nodes[n];
-      if (nd.parent != kInvalidNode) nd.parent = index[nd.parent];
-      if (nd.is_leaf()) {
-        const uint32_t first = static_cast<uint32_t>(expected.ref_indices.size());
-        for (uint32_t k = 0; k < nd.ref_count(); ++k) expected.ref_indices.push_back(shuffled.ref_indices[nd.first_ref() + k]);
-        nd.make_leaf(first, nd.ref_count());
-      } else {
-        nd.make_inner(index[nd.left()], index[nd.right()]);
-      }
-      expected.nodes.push_back(nd);
-    }
+    const Bvh expected = depth_first_copy(shuffled);
     shuffled.renumber_depth_first();
-    ASSERT_EQ(shuffled.root, 0u);
-    ASSERT_EQ(shuffled.nodes.size(), expected.nodes.size());
-    ASSERT_EQ(0, std::memcmp(shuffled.nodes.data(), expected.nodes.data(), expected.nodes.size() * sizeof(BvhNode)));
-    ASSERT_EQ(shuffled.ref_indices, expected.ref_indices);
+    expect_same_tree(shuffled, expected);
     ASSERT_TRUE(validate(shuffled, refs).ok());
+  }
+}
+
+// A tree already numbered depth-first is left as it is (renumbering returns early); one that
+// differs from that anywhere, in a node's place, an unused node or slot, or the order of the
+// leaves' slots, is still renumbered.
+TEST(Renumber, OnlyATreeAlreadyInOrderIsLeftAsItIs) {
+  PrimitiveRefs refs = testing::random_refs(300, 7);
+  SweepSahConfig cfg;
+  cfg.leaf.max_leaf_size = 4;
+  const Bvh built = build_sweep_sah(refs, cfg);
+  {
+    Bvh same = built;
+    same.renumber_depth_first();
+    expect_same_tree(same, depth_first_copy(built));
+    expect_same_tree(same, built);
+  }
+  // Each variant is a tree over the same references, but not in order.
+  std::vector<std::pair<const char*, Bvh>> variants;
+  {
+    Bvh t = built;
+    t.nodes.push_back(BvhNode{});  // an unreachable node at the end
+    variants.emplace_back("unreachable node", t);
+  }
+  {
+    Bvh t = built;
+    t.ref_indices.push_back(t.ref_indices.front());  // a slot no leaf uses
+    variants.emplace_back("unused slot", t);
+  }
+  {
+    // The root's children swapped: every node keeps its number, which is no longer its place.
+    Bvh t = built;
+    const uint32_t l = t.nodes[t.root].left(), r = t.nodes[t.root].right();
+    t.nodes[t.root].make_inner(r, l);
+    variants.emplace_back("children swapped", t);
+  }
+  {
+    // The first two leaves exchange their slots (their references move with them).
+    Bvh t = built;
+    std::vector<uint32_t> leaves;
+    for (uint32_t n : t.depth_first_order())
+      if (t.nodes[n].is_leaf()) leaves.push_back(n);
+    ASSERT_GE(leaves.size(), 2u);
+    BvhNode& a = t.nodes[leaves[0]];
+    BvhNode& b = t.nodes[leaves[1]];
+    std::vector<uint32_t> slots(t.ref_indices.begin() + a.first_ref(), t.ref_indices.begin() + b.first_ref() + b.ref_count());
+    std::rotate(slots.begin(), slots.begin() + a.ref_count(), slots.end());
+    std::copy(slots.begin(), slots.end(), t.ref_indices.begin() + a.first_ref());
+    const uint32_t first = a.first_ref(), na = a.ref_count(), nb = b.ref_count();
+    b.make_leaf(first, nb);
+    a.make_leaf(first + nb, na);
+    variants.emplace_back("leaf slots out of order", t);
+  }
+  for (auto& [name, t] : variants) {
+    SCOPED_TRACE(name);
+    const Bvh expected = depth_first_copy(t);
+    t.renumber_depth_first();
+    expect_same_tree(t, expected);
+    ASSERT_TRUE(validate(t, refs).ok());
   }
 }
 

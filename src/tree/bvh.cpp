@@ -68,6 +68,34 @@ std::vector<uint32_t> Bvh::post_order() const {
   return {order.rbegin(), order.rend()};
 }
 
+// Whether renumber_depth_first() would change nothing: every node reachable and already at
+// its depth-first number, every leaf's slots right after the previous leaf's, no slot unused.
+// Trees from the builders are numbered so, and an optimizer renumbers on entry: the walk
+// reads the array front to back, where renumbering allocates and writes it all (4M
+// triangles: 0.14 s of the optimizer's start).
+namespace {
+bool numbered_depth_first(const Bvh& bvh) {
+  if (bvh.root != 0) return false;
+  uint32_t next = 0;
+  uint64_t slot = 0;
+  std::vector<uint32_t> stack{bvh.root};
+  while (!stack.empty()) {
+    const uint32_t n = stack.back();
+    stack.pop_back();
+    if (n != next++ || n >= bvh.nodes.size()) return false;
+    const BvhNode& nd = bvh.nodes[n];
+    if (nd.is_leaf()) {
+      if (nd.first_ref() != slot) return false;
+      slot += nd.ref_count();
+    } else {
+      stack.push_back(nd.right());
+      stack.push_back(nd.left());
+    }
+  }
+  return next == bvh.nodes.size() && slot == bvh.ref_indices.size();
+}
+}  // namespace
+
 // In place: the optimizers call it on trees of tens of millions of nodes, where a second
 // node array would double the peak memory. Scratch: one index per node and the new slots.
 void Bvh::renumber_depth_first() {
@@ -75,6 +103,7 @@ void Bvh::renumber_depth_first() {
     nodes.clear();
     return;
   }
+  if (numbered_depth_first(*this)) return;
   // New numbers in depth_first_order()'s order (left subtree first), and the leaves' slots in
   // that order, rewritten as the walk meets them.
   std::vector<uint32_t> new_index(nodes.size(), kInvalidNode);
