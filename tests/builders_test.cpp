@@ -358,7 +358,9 @@ TEST(Builders, SweepOverAMeshBuildsTheTreeOfItsReferences) {
           const Bvh in_place = build_sweep_sah(meshes[m], config);
           EXPECT_TRUE(same_nodes(in_place, expected))
               << "mesh " << m << " leaf " << max_leaf << " chunks from " << chunked_from << " threads " << threads;
-          if (m < 6) EXPECT_TRUE(validate(in_place, refs).ok()) << "mesh " << m << " leaf " << max_leaf;
+          if (m < 6) {
+            EXPECT_TRUE(validate(in_place, refs).ok()) << "mesh " << m << " leaf " << max_leaf;
+          }
         }
       }
     }

@@ -105,7 +105,8 @@ struct Bvh {
 
   // Renumbers the reachable nodes in depth-first order (root 0, left child next) and
   // drops unreachable ones; leaf reference ranges are rewritten in the same order, so
-  // each leaf's slots follow the previous leaf's. Optimizers call it when done.
+  // each leaf's slots follow the previous leaf's. Optimizers call it when done. A tree
+  // already so numbered is only checked (one walk), not rewritten.
   void renumber_depth_first();
 
   size_t leaf_count() const;
