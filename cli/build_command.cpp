@@ -1,5 +1,6 @@
 // bvhopt build: scene -> references -> top-down build -> BVH file.
 #include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -78,20 +79,35 @@ void run_build(const BuildCommandOptions& opt) {
   progress.update("building " + std::to_string(mesh.triangle_count()) + " triangles with " + opt.builder, true);
   Stopwatch build_clock;
   std::string evh_report;
-  BuiltTree built = build_tree(mesh, opt.evh.make_refs(mesh, &evh_report), options);
+  BuiltTree built;
   Bvh& bvh = built.bvh;
   const PrimitiveRefs& refs = built.refs;
-  // Over subdivided references a leaf keeps one reference per triangle (the sbvh builder's
-  // leaves already do).
-  if (opt.evh.enabled && options.kind != BuilderKind::spatial_split) dedup_leaf_references(bvh, refs);
-  double build_s = build_clock.seconds();
+  double build_s = 0.0;
+  std::optional<TreeStats> stats;
+  if (!opt.evh.enabled && options.kind == BuilderKind::sweep_sah && options.leaf.max_leaf_size == 1) {
+    // The tree of the build over references, built over the mesh (build_sweep_sah(const
+    // Mesh&)) in less memory. Its statistics, whose per-node arrays would otherwise sit
+    // beside tree and references at the command's peak, come before the references exist:
+    // with one per triangle they count the same. The references are made for the file.
+    bvh = build_sweep_sah(mesh, sweep_sah_config(options));
+    build_s = build_clock.seconds();
+    stats = compute_stats(bvh, options.cost);
+    built.refs = make_references(mesh);
+  } else {
+    built = build_tree(mesh, opt.evh.make_refs(mesh, &evh_report), options);
+    // Over subdivided references a leaf keeps one reference per triangle (the sbvh builder's
+    // leaves already do).
+    if (opt.evh.enabled && options.kind != BuilderKind::spatial_split) dedup_leaf_references(bvh, built.refs);
+    build_s = build_clock.seconds();
+  }
 
   const BvhFileInfo info = scene_info(mesh, options.cost, opt.evh.enabled ? "evh+" + opt.builder : opt.builder);
   progress.update("writing " + opt.output, true);
   write_bvh_file(opt.output, bvh, refs, info);
   progress.finish();
 
-  print_build_summary(opt, mesh, refs, compute_stats(bvh, refs, options.cost), load_s, build_s, evh_report);
+  if (!stats) stats = compute_stats(bvh, refs, options.cost);
+  print_build_summary(opt, mesh, refs, *stats, load_s, build_s, evh_report);
 }
 
 }  // namespace

@@ -8,8 +8,13 @@
 #include <sstream>
 #include <set>
 
-#include "test_support.h"
 #include <string>
+
+#include "bvhopt/build.h"
+#include "bvhopt/bvh_file.h"
+#include "bvhopt/scene_file.h"
+#include "bvhopt/triangle_cost.h"
+#include "test_support.h"
 
 namespace fs = std::filesystem;
 
@@ -42,6 +47,34 @@ TEST_F(Cli, BuildThenStatsAgreeOnTheCost) {
   EXPECT_DOUBLE_EQ(built["cost"].get<double>(), stats["cost"].get<double>());
   EXPECT_EQ(stats["method"], "binned");
   EXPECT_EQ(stats["references"].get<size_t>(), built["triangles"].get<size_t>());
+}
+
+// The default build (sweep, leaves of one) builds over the mesh and takes its statistics
+// before the references exist: the file must hold the tree and references of the build over
+// references, and the printed cost and ocost must be theirs to the last bit.
+TEST_F(Cli, DefaultBuildWritesTheTreeOverReferences) {
+  const std::string scene = "builtin:atrium?triangles=5000";
+  const fs::path bvh = dir_ / "scene.bvh";
+  CliRun b = run("build '" + scene + "' --json -o " + bvh.string());
+  ASSERT_EQ(b.exit_code, 0) << b.err;
+  const auto printed = nlohmann::json::parse(b.out);
+  const bvhopt::Mesh mesh = bvhopt::load_scene(scene);
+  const bvhopt::BuiltTree want = bvhopt::build_tree(mesh, bvhopt::make_references(mesh), bvhopt::BuildOptions{});
+  const bvhopt::BvhFile got = bvhopt::read_bvh_file(bvh);
+  ASSERT_EQ(got.bvh.nodes.size(), want.bvh.nodes.size());
+  for (size_t i = 0; i < want.bvh.nodes.size(); ++i) {
+    const bvhopt::BvhNode &a = got.bvh.nodes[i], &w = want.bvh.nodes[i];
+    ASSERT_TRUE(a.box == w.box && a.parent == w.parent && a.left_or_first == w.left_or_first &&
+                a.right_or_count == w.right_or_count)
+        << "node " << i;
+  }
+  EXPECT_EQ(got.bvh.ref_indices, want.bvh.ref_indices);
+  EXPECT_EQ(got.refs.triangle_ids, want.refs.triangle_ids);
+  EXPECT_EQ(got.refs.boxes, want.refs.boxes);
+  const bvhopt::TreeStats st = bvhopt::compute_stats(want.bvh, want.refs, bvhopt::CostModel{});
+  EXPECT_EQ(printed["cost"].get<double>(), st.cost);
+  EXPECT_EQ(printed["ocost"].get<double>(), st.ocost);
+  EXPECT_EQ(printed["nodes"].get<size_t>(), st.nodes);
 }
 
 TEST_F(Cli, MissingSceneNamesTheFile) {
