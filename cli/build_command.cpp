@@ -1,4 +1,5 @@
-// bvhopt build: scene -> references -> top-down build -> BVH file.
+// bvhopt build: scene -> references -> top-down build -> BVH file (the default sweep build,
+// leaves of one, reads the mesh itself and makes the references for the file).
 #include <iostream>
 #include <optional>
 #include <string>
