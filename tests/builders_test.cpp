@@ -312,16 +312,6 @@ TEST(Builders, SweepInChunksBuildsTheSequentialTree) {
 // The sweep over a mesh with its leaves in place must be the sweep over make_references,
 // node for node: the same boxes, parents, children and leaf slots at the same indices.
 TEST(Builders, SweepOverAMeshBuildsTheTreeOfItsReferences) {
-  auto same_nodes = [](const Bvh& a, const Bvh& b) {
-    if (a.root != b.root || a.nodes.size() != b.nodes.size() || a.ref_indices != b.ref_indices) return false;
-    for (size_t i = 0; i < a.nodes.size(); ++i) {
-      const BvhNode &x = a.nodes[i], &y = b.nodes[i];
-      if (!(x.box == y.box) || x.parent != y.parent || x.left_or_first != y.left_or_first ||
-          x.right_or_count != y.right_or_count)
-        return false;
-    }
-    return true;
-  };
   Mesh same;  // ten copies of one triangle: every centroid coincides, so nodes are halved
   same.positions = {0, 0, 0, 1, 0, 0, 0, 1, 0};
   for (int i = 0; i < 10; ++i) same.add_triangle(0, 1, 2);
@@ -356,7 +346,7 @@ TEST(Builders, SweepOverAMeshBuildsTheTreeOfItsReferences) {
         for (int threads : {1, 2}) {
           tbb::global_control gc(tbb::global_control::max_allowed_parallelism, threads);
           const Bvh in_place = build_sweep_sah(meshes[m], config);
-          EXPECT_TRUE(same_nodes(in_place, expected))
+          EXPECT_TRUE(testing::same_nodes(in_place, expected))
               << "mesh " << m << " leaf " << max_leaf << " chunks from " << chunked_from << " threads " << threads;
           if (m < 6) {
             EXPECT_TRUE(validate(in_place, refs).ok()) << "mesh " << m << " leaf " << max_leaf;

@@ -101,6 +101,20 @@ std::string tree_signature(const Bvh& bvh, const PrimitiveRefs& refs) {
   return rec(rec, bvh.root);
 }
 
+::testing::AssertionResult same_nodes(const Bvh& got, const Bvh& want) {
+  if (got.root != want.root) return ::testing::AssertionFailure() << "root " << got.root << ", want " << want.root;
+  if (got.nodes.size() != want.nodes.size())
+    return ::testing::AssertionFailure() << got.nodes.size() << " nodes, want " << want.nodes.size();
+  for (size_t i = 0; i < want.nodes.size(); ++i) {
+    const BvhNode &a = got.nodes[i], &w = want.nodes[i];
+    if (!(a.box == w.box) || a.parent != w.parent || a.left_or_first != w.left_or_first ||
+        a.right_or_count != w.right_or_count)
+      return ::testing::AssertionFailure() << "node " << i << " differs";
+  }
+  if (got.ref_indices != want.ref_indices) return ::testing::AssertionFailure() << "leaf slots differ";
+  return ::testing::AssertionSuccess();
+}
+
 std::string read_text(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   std::stringstream ss;

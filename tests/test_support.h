@@ -46,6 +46,10 @@ double optimal_tree_cost(const PrimitiveRefs& refs, double c_t, double c_i);
 // "((0,1),2)" of triangle ids: two trees are the same tree exactly when the strings match.
 std::string tree_signature(const Bvh& bvh, const PrimitiveRefs& refs);
 
+// Success when two trees have the same root and nodes (boxes, links and parents, bit for
+// bit) and the same leaf slots; else the first difference.
+::testing::AssertionResult same_nodes(const Bvh& got, const Bvh& want);
+
 // The whole contents of a file ("" when it cannot be read).
 std::string read_text(const std::filesystem::path& path);
 
