@@ -389,6 +389,42 @@ TEST(Renumber, InPlaceEqualsACopyInDepthFirstOrder) {
   }
 }
 
+// for_each_children_first visits each reachable node once, after its children, on a tree
+// numbered depth-first (from the array's end, no order allocated) and on any other (its
+// post-order): the costs computed bottom-up over it depend on that.
+TEST(Renumber, ChildrenFirstVisitsEveryReachableNodeAfterItsChildren) {
+  PrimitiveRefs refs = testing::random_refs(200, 3);
+  const Bvh built = build_sweep_sah(refs);
+  ASSERT_TRUE(built.numbered_depth_first());
+  Bvh swapped = built;  // the root's children swapped: numbers no longer depth-first
+  {
+    const uint32_t l = swapped.nodes[swapped.root].left(), r = swapped.nodes[swapped.root].right();
+    swapped.nodes[swapped.root].make_inner(r, l);
+  }
+  Bvh extra = built;  // an unreachable node
+  extra.nodes.push_back(BvhNode{});
+  EXPECT_FALSE(swapped.numbered_depth_first());
+  EXPECT_FALSE(extra.numbered_depth_first());
+  EXPECT_FALSE(Bvh{}.numbered_depth_first());
+  for (const Bvh* t : std::vector<const Bvh*>{&built, &swapped, &extra}) {
+    std::vector<int> seen_at(t->nodes.size(), -1);
+    int step = 0;
+    for_each_children_first(*t, [&](uint32_t n) {
+      ASSERT_LT(n, t->nodes.size());
+      ASSERT_EQ(seen_at[n], -1) << "node " << n << " visited twice";
+      const BvhNode& nd = t->nodes[n];
+      if (!nd.is_leaf()) {
+        ASSERT_NE(seen_at[nd.left()], -1) << "node " << n << " before its left child";
+        ASSERT_NE(seen_at[nd.right()], -1) << "node " << n << " before its right child";
+      }
+      seen_at[n] = step++;
+    });
+    const std::vector<uint32_t> reachable = t->depth_first_order();
+    EXPECT_EQ(static_cast<size_t>(step), reachable.size());
+    for (uint32_t n : reachable) EXPECT_NE(seen_at[n], -1) << "node " << n << " not visited";
+  }
+}
+
 // A tree already numbered depth-first is left as it is (renumbering returns early); one that
 // differs from that anywhere, in a node's place, an unused node or slot, or the order of the
 // leaves' slots, is still renumbered.

@@ -42,11 +42,11 @@ void check_finite_cost(double cost, const char* what) {
 std::vector<double> subtree_costs(const Bvh& bvh, const CostModel& model) {
   std::vector<double> cost(bvh.nodes.size(), 0.0);
   const CostWeights w(bvh);
-  for (uint32_t n : bvh.post_order()) {
+  for_each_children_first(bvh, [&](uint32_t n) {
     const BvhNode& nd = bvh[n];
     cost[n] = nd.is_leaf() ? leaf_cost(w(nd), nd.ref_count(), model)
                            : model.traversal * w(nd) + cost[nd.left()] + cost[nd.right()];
-  }
+  });
   return cost;
 }
 
@@ -68,19 +68,19 @@ CollapseCosts collapse_costs_by(const Bvh& bvh, const CostModel& model, uint32_t
   out.collapse.assign(bvh.nodes.size(), 0);
   if (bvh.empty()) return out;
   const CostWeights w(bvh);
-  for (uint32_t n : bvh.post_order()) {
+  for_each_children_first(bvh, [&](uint32_t n) {
     const BvhNode& nd = bvh[n];
     const uint64_t c = count(n);
     if (nd.is_leaf()) {
       out.best[n] = leaf_cost(w(nd), static_cast<uint32_t>(c), model);
-      continue;
+      return;
     }
     const double as_tree = model.traversal * w(nd) + out.best[nd.left()] + out.best[nd.right()];
     const bool may_collapse = max_leaf_size == 0 || c <= max_leaf_size;
     const double as_leaf = model.intersection * w(nd) * static_cast<double>(c);
     out.collapse[n] = may_collapse && as_leaf <= as_tree;
     out.best[n] = out.collapse[n] ? as_leaf : as_tree;
-  }
+  });
   return out;
 }
 

@@ -1,5 +1,6 @@
 #include "bvhopt/collapse_leaves.h"
 
+#include <utility>
 #include <vector>
 
 #include "bvhopt/cost.h"
@@ -12,9 +13,18 @@ namespace {
 // Collapses the nodes `collapse` marks (the recurrence of optimal_collapse_cost, so the
 // collapsed tree's cost equals the `ocost` computed on the tree before); fills the counts.
 void collapse_marked(Bvh& bvh, const std::vector<uint8_t>& collapse, CollapseResult& result) {
-  for (uint32_t n : bvh.post_order()) {
+  // Counted in a walk of its own, with no order of every node to hold.
+  std::vector<uint32_t> walk{bvh.root};
+  while (!walk.empty()) {
+    const BvhNode& nd = bvh[walk.back()];
+    walk.pop_back();
     result.nodes_before++;
-    result.leaves_before += bvh[n].is_leaf();
+    if (nd.is_leaf()) {
+      result.leaves_before++;
+    } else {
+      walk.push_back(nd.right());
+      walk.push_back(nd.left());
+    }
   }
 
   // Top-down: the first collapsible node on each path becomes a leaf holding, in
@@ -68,7 +78,10 @@ CollapseResult collapse_leaves(Bvh& bvh, const CollapseConfig& config) {
   CollapseResult result;
   if (bvh.empty()) return result;
   result.cost_before = sah_cost(bvh, config.cost);
-  collapse_marked(bvh, collapse_costs(bvh, config.cost, config.max_leaf_size).collapse, result);
+  // Only the marks outlive the costs: the per-node costs (8 bytes a node) are freed before
+  // the collapse, which is bake's peak of memory.
+  const std::vector<uint8_t> marked = std::move(collapse_costs(bvh, config.cost, config.max_leaf_size).collapse);
+  collapse_marked(bvh, marked, result);
   count_after(bvh, result);
   result.cost_after = sah_cost(bvh, config.cost);
   return result;
@@ -82,8 +95,11 @@ CollapseResult collapse_leaves(Bvh& bvh, const PrimitiveRefs& refs, const Collap
   // 2M triangles those were most of bake's collapse time).
   if (one_slot_per_triangle(bvh, refs)) return collapse_leaves(bvh, config);
   result.cost_before = sah_cost(bvh, refs, config.cost);
-  const std::vector<uint64_t> triangles = subtree_triangle_counts(bvh, refs);
-  collapse_marked(bvh, collapse_costs(bvh, config.cost, config.max_leaf_size, triangles).collapse, result);
+  std::vector<uint64_t> triangles = subtree_triangle_counts(bvh, refs);
+  const std::vector<uint8_t> marked =
+      std::move(collapse_costs(bvh, config.cost, config.max_leaf_size, triangles).collapse);
+  triangles = {};
+  collapse_marked(bvh, marked, result);
   // Only a leaf holding one triangle twice changes, so on trees without split references
   // this is the plain collapse.
   const LeafDedupStats dedup = dedup_leaf_references(bvh, refs);
