@@ -17,6 +17,7 @@
 #include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/validate.h"
 #include "optimize/huge_page_backing.h"
+#include "optimize/largest_from_root.h"
 #include "optimize/largest_keys.h"
 #include "optimize/reinsertion_search.h"
 #include "optimize/undo_log.h"
@@ -86,6 +87,93 @@ Bvh build_start(const PrimitiveRefs& refs, int kind) {
 }
 
 double relative_gap(double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-300); }
+
+// The walk from the root gives exactly the keys a full sort of the inner nodes' keys gives
+// (the optimizer's area keys: the root's the smallest), on built trees, on trees whose ids
+// the optimizer's moves have shuffled, with many nodes tied at the k-th key (copies of one
+// box), and it declines where the k-th key is 0 (zero-area boxes), which the root ties.
+TEST(LargestFromRoot, GivesTheKLargestAreaKeysAsAFullSortDoes) {
+  detail::LargestFromRoot walk;
+  int walked = 0, declined = 0;
+  auto check = [&](const Bvh& bvh, size_t k, const std::string& what) {
+    const double root_area = bvh[bvh.root].area();
+    auto key_of = [&](size_t i) {
+      const float m = i == bvh.root ? 0.0f : static_cast<float>(bvh.nodes[i].area() / root_area);
+      return (uint64_t{std::bit_cast<uint32_t>(m)} << 32) | (0xffffffffu - static_cast<uint32_t>(i));
+    };
+    std::vector<uint64_t> expected;
+    for (size_t i = 0; i < bvh.nodes.size(); ++i)
+      if (!bvh.nodes[i].is_leaf()) expected.push_back(key_of(i));
+    std::sort(expected.begin(), expected.end(), std::greater<uint64_t>());
+    expected.resize(std::min(k, expected.size()));
+    // The walk leaves out the root (which the optimizer skips), of all the keys the smallest
+    // or tied at 0 with zero-area nodes.
+    std::erase(expected, key_of(bvh.root));
+    std::vector<uint64_t> got;
+    if (!walk.largest(bvh, k, key_of, got)) {
+      ++declined;
+      EXPECT_EQ(expected.size() == k ? expected.back() >> 32 : 0u, 0u) << what << ": declined, k " << k;
+      return;
+    }
+    ++walked;
+    EXPECT_EQ(got, expected) << what << ", k " << k;
+  };
+  for (uint32_t trial = 0; trial < 40; ++trial) {
+    const uint32_t count = 2 + trial * 97;
+    PrimitiveRefs refs = testing::random_refs(count, 700 + trial);
+    if (trial % 4 == 1)  // every fifth box a copy of the first: whole subtrees tied
+      for (size_t i = 5; i < refs.boxes.size(); i += 5) refs.boxes[i] = refs.boxes[0];
+    if (trial % 4 == 2)  // a third of the boxes one point: zero-area subtrees
+      for (size_t i = 0; i < refs.boxes.size(); i += 3) refs.boxes[i] = Box(refs.boxes[1].min, refs.boxes[1].min);
+    Bvh bvh = build_start(refs, static_cast<int>(trial));
+    if (trial % 2 == 1 && count >= 20) {  // ids shuffled by moves: parents after children
+      InsertionConfig config;
+      config.form = InsertionForm::sequential;
+      config.limits.max_passes = 3;
+      config.batch = 0.1;
+      Bvh work = bvh, moved;
+      int moves = 0;
+      testing::optimize_insertion_observed(work, config, [&](const Bvh& t, double) {
+        if (++moves == 5) moved = t;
+      });
+      ASSERT_GE(moves, 5) << "trial " << trial;
+      ASSERT_FALSE(moved.numbered_depth_first());
+      bvh = std::move(moved);
+    }
+    for (size_t k = 1; k <= count; k += 1 + count / 64) check(bvh, k, "trial " + std::to_string(trial));
+    check(bvh, count, "trial " + std::to_string(trial));
+  }
+  // Every box the same: all tied at the root's area, and the walk reads them all.
+  PrimitiveRefs same = testing::random_refs(300, 5);
+  for (Box& b : same.boxes) b = same.boxes[0];
+  check(build_sweep_sah(same), 10, "one box");
+  // A child tied with its parent and numbered before it, so with the larger key: the walk
+  // meets the parent first, and the k-th key (k = 1) is the child's.
+  Bvh tied;
+  tied.nodes.resize(9);
+  auto inner = [&](uint32_t n, uint32_t l, uint32_t r, float size) {
+    tied[n].make_inner(l, r);
+    tied[n].set_box(Box(Vec3(0.0f), Vec3(size)));
+    tied[l].parent = tied[r].parent = n;
+  };
+  for (uint32_t leaf = 4; leaf < 9; ++leaf) {
+    tied[leaf].make_leaf(leaf - 4, 1);
+    tied[leaf].set_box(Box(Vec3(0.0f), Vec3(0.25f)));
+  }
+  inner(0, 3, 1, 10.0f);
+  inner(3, 2, 4, 1.0f);
+  inner(2, 5, 6, 1.0f);
+  inner(1, 7, 8, 0.5f);
+  tied.root = 0;
+  tied.ref_indices = {0, 1, 2, 3, 4};
+  for (size_t k = 1; k <= 3; ++k) check(tied, k, "a child tied with its parent");
+  // Nearly all one point: the k-th key 0, tied with the root's.
+  PrimitiveRefs points = testing::random_refs(300, 6);
+  for (size_t i = 10; i < points.boxes.size(); ++i) points.boxes[i] = Box(points.boxes[0].min, points.boxes[0].min);
+  check(build_object_median(points), 100, "points");
+  EXPECT_GT(walked, 1000);
+  EXPECT_GT(declined, 0);
+}
 
 // Algorithm 1 must find the same minimum as trying every node, including when a subtree
 // is excluded (the parallel form's searches).

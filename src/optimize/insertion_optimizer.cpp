@@ -16,6 +16,7 @@
 #include "bvhopt/testing/insertion_hooks.h"
 #include "optimize/find_by_name.h"
 #include "optimize/huge_page_backing.h"
+#include "optimize/largest_from_root.h"
 #include "optimize/largest_keys.h"
 #include "optimize/pass_driver.h"
 #include "optimize/reinsertion_search.h"
@@ -239,9 +240,14 @@ class InsertionOptimizer {
       }
       return;
     }
-    largest_.largest(
-        bvh_.nodes.size(), k, [&](size_t i) { return !bvh_.nodes[i].is_leaf(); },
-        [&](size_t i) { return key(static_cast<uint32_t>(i)); }, keys_);
+    const auto key_of = [&](size_t i) { return key(static_cast<uint32_t>(i)); };
+    // Areas never grow from a node to its children: the largest are found from the root
+    // down, without reading the whole array. The same keys either way.
+    const bool from_root = config_.measure == InsertionMeasure::area &&
+                           detail::LargestFromRoot::pays(bvh_.nodes.size(), k) &&
+                           from_root_.largest(bvh_, k, key_of, keys_);
+    if (!from_root)
+      largest_.largest(bvh_.nodes.size(), k, [&](size_t i) { return !bvh_.nodes[i].is_leaf(); }, key_of, keys_);
     for (uint64_t kk : keys_) {
       const uint32_t n = 0xffffffffu - static_cast<uint32_t>(kk);
       if (n != bvh_.root) out.push_back(n);
@@ -622,6 +628,7 @@ class InsertionOptimizer {
   size_t inner_count_ = 0;
   std::vector<uint64_t> keys_;
   detail::LargestKeys largest_;
+  detail::LargestFromRoot from_root_;
   std::vector<Plan> plans_;
   detail::NodeSet touched_;  // nodes a move of this parallel pass changed
   detail::UndoLog undo_;
