@@ -602,16 +602,18 @@ TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreads) {
 }
 
 // The collapse stalls the passes while it runs and pays back over a long run only: started
-// without a time limit and in runs that leave about 20 ms per MB of nodes, not in the 1x
-// budgets of bake --quality fast (4M triangles, 320 MB of nodes: 2.6 s).
+// without a time limit and in runs that leave about 80 ms per MB of nodes, not in the 1x
+// and 5x budgets of bake --quality fast and balanced (4M triangles, 320 MB of nodes: 2.6 and
+// 13 s), where it left time for fewer passes.
 TEST(HugePageBacking, PaysOffOnlyInRunsLongEnough) {
   using detail::HugePageBacking;
   const size_t hall_4m = 320'000'000, hall_1m = 80'000'000;
-  EXPECT_TRUE(HugePageBacking::pays_off(hall_4m, 0.0, 0.3));   // no limit
-  EXPECT_FALSE(HugePageBacking::pays_off(hall_4m, 2.6, 0.3));  // 1x the build time
-  EXPECT_TRUE(HugePageBacking::pays_off(hall_4m, 13.0, 0.3));  // 5x
-  EXPECT_FALSE(HugePageBacking::pays_off(hall_1m, 0.54, 0.06));
-  EXPECT_TRUE(HugePageBacking::pays_off(hall_1m, 2.7, 0.06));
+  EXPECT_TRUE(HugePageBacking::pays_off(hall_4m, 0.0, 0.3));    // no limit
+  EXPECT_FALSE(HugePageBacking::pays_off(hall_4m, 2.6, 0.3));   // 1x the build time
+  EXPECT_FALSE(HugePageBacking::pays_off(hall_4m, 13.0, 0.3));  // 5x
+  EXPECT_TRUE(HugePageBacking::pays_off(hall_4m, 30.0, 0.3));
+  EXPECT_FALSE(HugePageBacking::pays_off(hall_1m, 2.7, 0.06));
+  EXPECT_TRUE(HugePageBacking::pays_off(hall_1m, 8.0, 0.06));
   EXPECT_FALSE(HugePageBacking::pays_off(hall_1m, 2.0, 2.5));  // already past the limit
 }
 

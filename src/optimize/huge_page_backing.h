@@ -63,12 +63,15 @@ class HugePageBacking {
   }
   // Whether the collapse pays in a run of `time_limit` seconds (0: none) that has run for
   // `elapsed`. While it runs it stalls the optimizer's threads (a page being collapsed
-  // cannot be read, and every attempt flushes the TLBs): 0.3 to 0.8 s at 4M triangles, whose
-  // nodes take 288 MB. Afterwards the passes take about 5 % less time, so it pays only where
-  // the run may last about 20 ms per MB of nodes more: at 4M not within 1x the build time
-  // (2.6 s: without it 379.1 there instead of 379.5-379.6), at 5x it does.
+  // cannot be read, and every attempt flushes the TLBs): about 1 s at 4M triangles, whose
+  // nodes take 288 MB (the first pass 1.1 s instead of 0.35, the next 15 a quarter slower).
+  // Afterwards the passes take about 5 % less time, so it pays only where the run may last
+  // about 80 ms per MB of nodes more (4M: 23 s). Measured at 4M, 2 threads: to convergence
+  // (38 s) 38.0-39.1 s with it, 39.7-39.8 without; within 5x the build time (14 s) 192
+  // passes with it, 196-199 without (three pairs of runs), 358.10-358.33 against
+  // 358.03-358.10 (six pairs).
   static bool pays_off(size_t bytes, double time_limit, double elapsed) {
-    constexpr double kSecondsPerMB = 0.02;
+    constexpr double kSecondsPerMB = 0.08;
     return time_limit == 0.0 || time_limit - elapsed >= kSecondsPerMB * (static_cast<double>(bytes) / 1e6);
   }
   HugePageBacking(const HugePageBacking&) = delete;
