@@ -73,8 +73,12 @@ class LargestFromRoot {
     }
     if (out.empty()) return true;
     k = std::min(k, out.size());
-    std::nth_element(out.begin(), out.begin() + (k - 1), out.end(), std::greater<uint64_t>());
-    std::sort(out.begin(), out.begin() + k, std::greater<uint64_t>());
+    // The keys came out largest first, but for a child tied with its parent and numbered
+    // before it (a larger key, met later): rare, so the sort is mostly skipped.
+    if (!std::is_sorted(out.begin(), out.end(), std::greater<uint64_t>())) {
+      std::nth_element(out.begin(), out.begin() + (k - 1), out.end(), std::greater<uint64_t>());
+      std::sort(out.begin(), out.begin() + k, std::greater<uint64_t>());
+    }
     out.resize(k);
     return true;
   }
