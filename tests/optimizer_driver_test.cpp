@@ -6,9 +6,11 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <functional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "bvhopt/cost.h"
@@ -190,6 +192,48 @@ TEST(OptimizerDriver, PassLimitAtAStageBoundary) {
   EXPECT_EQ(h.stop_reason, StopReason::pass_limit);
   EXPECT_EQ(h.passes, s.passes);
   EXPECT_EQ(testing::tree_signature(hyb, refs), testing::tree_signature(seq, refs));
+}
+
+// A time limit or a stop request that comes while the hybrid's sequential stage ends by its
+// own rule stops the run there too, before its parallel stage makes a pass: the stage's last
+// pass reports convergence, not the limit.
+TEST(OptimizerDriver, LimitsReachedAtAStageBoundary) {
+  PrimitiveRefs refs = testing::random_refs(2000, 24);
+  const Bvh start = build_spatial_median(refs);
+  Bvh seq = start;
+  const OptimizeReport s = optimize_insertion(seq, insertion_of(InsertionForm::sequential));
+  ASSERT_EQ(s.stop_reason, StopReason::converged);
+  {
+    Bvh hyb = start;
+    InsertionConfig cfg = insertion_of(InsertionForm::hybrid);
+    bool asked = false;
+    cfg.limits.on_pass = [&](const PassRecord& p) { asked = asked || p.pass == s.passes; };
+    cfg.limits.stop_requested = [&] { return asked; };
+    const OptimizeReport h = optimize_insertion(hyb, cfg);
+    EXPECT_EQ(h.stop_reason, StopReason::interrupted);
+    EXPECT_EQ(h.passes, s.passes);
+    EXPECT_EQ(testing::tree_signature(hyb, refs), testing::tree_signature(seq, refs));
+  }
+  {
+    // The limit passes while the stage's last pass reports (the callback waits it out), after
+    // the driver has compared that pass's end with it.
+    Bvh hyb = start;
+    InsertionConfig cfg = insertion_of(InsertionForm::hybrid);
+    cfg.limits.time_limit = 0.5 + 3.0 * s.seconds;
+    double boundary_seconds = 0.0;
+    cfg.limits.on_pass = [&](const PassRecord& p) {
+      if (p.pass != s.passes) return;
+      boundary_seconds = p.seconds;
+      const auto until = std::chrono::steady_clock::now() +
+                         std::chrono::duration<double>(cfg.limits.time_limit - p.seconds + 0.01);
+      std::this_thread::sleep_until(until);
+    };
+    const OptimizeReport h = optimize_insertion(hyb, cfg);
+    if (boundary_seconds >= cfg.limits.time_limit) GTEST_SKIP() << "the stage itself outran the limit";
+    EXPECT_EQ(h.stop_reason, StopReason::time_limit);
+    EXPECT_EQ(h.passes, s.passes);
+    EXPECT_EQ(testing::tree_signature(hyb, refs), testing::tree_signature(seq, refs));
+  }
 }
 
 TEST(OptimizerDriver, StopReasonNamesAreTheFileWords) {
