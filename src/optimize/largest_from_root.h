@@ -4,8 +4,9 @@
 //
 // Why: the insertion optimizer selects its candidates by area on every pass of its first
 // stages and of its last, 1 % of the inner nodes. LargestKeys reads every node for that, the
-// whole array (288 MB at 4M triangles) on every pass: a sixth of a pass in the first stage at
-// 4M. A node's box contains its children's, and rounding is monotone, so its area is at least
+// whole array (288 MB at 4M triangles) on every pass: at 1M the first stage's passes took
+// 15.5 ms with that scan, 9 ms with this walk. A node's box contains its children's, and
+// rounding is monotone, so its area is at least
 // theirs: the nodes with keys at or above any threshold hang together from the root, and a
 // best-first walk from there meets them in order, reading about three nodes per candidate.
 #pragma once
