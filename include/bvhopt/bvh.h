@@ -116,6 +116,26 @@ struct Bvh {
   size_t inner_count() const;
 };
 
+// Calls visit(n) for every node reachable from the root, depth-first: each node before its
+// subtrees, the left one first (the right one if !left_first). The walk holds a stack, not an
+// order of every node. visit returns false to end the walk at n, before n's children are
+// read (a check of n itself may stop it); then this returns false.
+template <class F>
+bool for_each_depth_first(const Bvh& bvh, F&& visit, bool left_first = true) {
+  if (bvh.empty()) return true;
+  std::vector<uint32_t> stack{bvh.root};
+  while (!stack.empty()) {
+    const uint32_t n = stack.back();
+    stack.pop_back();
+    if (!visit(n)) return false;
+    const BvhNode& nd = bvh[n];
+    if (nd.is_leaf()) continue;
+    stack.push_back(left_first ? nd.right() : nd.left());
+    stack.push_back(left_first ? nd.left() : nd.right());
+  }
+  return true;
+}
+
 // Calls f(n) for every node reachable from the root, each after its children. On a tree
 // numbered depth-first that is the array from its end, with no order of every node to
 // allocate (8 bytes a triangle at the peak of bake's collapse); otherwise post_order().

@@ -13,19 +13,12 @@ namespace {
 // Collapses the nodes `collapse` marks (the recurrence of optimal_collapse_cost, so the
 // collapsed tree's cost equals the `ocost` computed on the tree before); fills the counts.
 void collapse_marked(Bvh& bvh, const std::vector<uint8_t>& collapse, CollapseResult& result) {
-  // Counted in a walk of its own, with no order of every node to hold.
-  std::vector<uint32_t> walk{bvh.root};
-  while (!walk.empty()) {
-    const BvhNode& nd = bvh[walk.back()];
-    walk.pop_back();
+  // Counted in a walk with no order of every node to hold.
+  for_each_depth_first(bvh, [&](uint32_t n) {
     result.nodes_before++;
-    if (nd.is_leaf()) {
-      result.leaves_before++;
-    } else {
-      walk.push_back(nd.right());
-      walk.push_back(nd.left());
-    }
-  }
+    result.leaves_before += bvh[n].is_leaf();
+    return true;
+  });
 
   // Top-down: the first collapsible node on each path becomes a leaf holding, in
   // depth-first order, the references of every leaf below it.

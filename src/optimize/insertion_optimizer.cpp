@@ -446,7 +446,8 @@ class InsertionOptimizer {
     for (uint32_t c : candidates) ++bucket_start_[(c >> shift) + 1];
     for (size_t b = 1; b < bucket_start_.size(); ++b) bucket_start_[b] += bucket_start_[b - 1];
     by_id_.resize(candidates.size());
-    for (size_t i = 0; i < candidates.size(); ++i) by_id_[bucket_start_[candidates[i] >> shift]++] = static_cast<uint32_t>(i);
+    for (size_t i = 0; i < candidates.size(); ++i)
+      by_id_[bucket_start_[candidates[i] >> shift]++] = static_cast<uint32_t>(i);
   }
 
   // Meister-Bittner style: search every candidate against the current tree on all threads,

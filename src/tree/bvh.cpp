@@ -46,16 +46,13 @@ std::vector<uint32_t> pre_order(const Bvh& bvh, bool left_first) {
   std::vector<uint32_t> order;
   if (bvh.empty()) return order;
   order.reserve(bvh.nodes.size());
-  std::vector<uint32_t> stack{bvh.root};
-  while (!stack.empty()) {
-    uint32_t n = stack.back();
-    stack.pop_back();
-    order.push_back(n);
-    if (!bvh[n].is_leaf()) {
-      stack.push_back(left_first ? bvh[n].right() : bvh[n].left());
-      stack.push_back(left_first ? bvh[n].left() : bvh[n].right());
-    }
-  }
+  for_each_depth_first(
+      bvh,
+      [&](uint32_t n) {
+        order.push_back(n);
+        return true;
+      },
+      left_first);
   return order;
 }
 
@@ -75,18 +72,9 @@ std::vector<uint32_t> Bvh::post_order() const {
 bool Bvh::numbered_depth_first() const {
   if (empty() || root != 0) return false;
   uint32_t next = 0;
-  std::vector<uint32_t> stack{root};
-  while (!stack.empty()) {
-    const uint32_t n = stack.back();
-    stack.pop_back();
-    if (n != next++ || n >= nodes.size()) return false;
-    const BvhNode& nd = nodes[n];
-    if (!nd.is_leaf()) {
-      stack.push_back(nd.right());
-      stack.push_back(nd.left());
-    }
-  }
-  return next == nodes.size();
+  // A number out of the array ends the walk before its node is read.
+  const bool whole = for_each_depth_first(*this, [&](uint32_t n) { return n < nodes.size() && n == next++; });
+  return whole && next == nodes.size();
 }
 
 namespace {
