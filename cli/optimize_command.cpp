@@ -193,11 +193,12 @@ Loaded load_input(const SceneOption& scene, const EvhOption& evh, const SceneBui
 std::string trace_csv(const OptimizeReport& report) {
   std::ostringstream f;
   f.precision(10);
-  f << "pass,cost,best_cost,temperature,moves,seconds\n";
-  f << 0 << ',' << report.initial_cost << ',' << report.initial_cost << ",0,0,0\n";
+  // Columns are only ever added at the end, so that readers of older traces keep working.
+  f << "pass,cost,best_cost,temperature,moves,seconds,stage\n";
+  f << 0 << ',' << report.initial_cost << ',' << report.initial_cost << ",0,0,0,0\n";
   for (const PassRecord& p : report.trace)
     f << p.pass << ',' << p.cost << ',' << p.best_cost << ',' << p.temperature << ',' << p.moves << ',' << p.seconds
-      << '\n';
+      << ',' << p.stage << '\n';
   return f.str();
 }
 
@@ -317,7 +318,7 @@ void register_optimize_command(CLI::App& app) {
       ->type_name("S|Nx")
       ->excludes("--time-limit");
   cmd->add_option("--seed", opt->shared.seed, "Seed of every random choice")->check(whole_number(0, UINT64_MAX))->capture_default_str();
-  cmd->add_option("--cost-trace", opt->trace_path, "Write the cost after every pass as CSV")->type_name("FILE.csv");
+  cmd->add_option("--cost-trace", opt->trace_path, "Write the cost after every pass as CSV (pass, cost, best_cost, temperature, moves, seconds, stage: the method's stage that ran the pass, from 0)")->type_name("FILE.csv");
   opt->builder.add_to(cmd);
   opt->evh.add_to(cmd);
   opt->cost.add_to(cmd);

@@ -679,6 +679,62 @@ TEST(InsertionOptimizer, PassLimitEndsAnOscillatingRun) {
   }
 }
 
+// Where each stage ends, read from the trace's stage numbers: the hybrid form's two stages
+// and the regional form's four run in order, and the regional form's sequential stage (its
+// second) hands over at its second pass in a row that does not lower the stage's best cost
+// by the hand-over margin, or at the first where random_after is 1.
+std::vector<std::vector<PassRecord>> passes_by_stage(const OptimizeReport& r) {
+  std::vector<std::vector<PassRecord>> stages;
+  for (const PassRecord& p : r.trace) {
+    EXPECT_TRUE(p.stage == stages.size() || p.stage + 1 == stages.size()) << "pass " << p.pass;
+    if (p.stage == stages.size()) stages.emplace_back();
+    stages.back().push_back(p);
+  }
+  return stages;
+}
+
+// Passes at the end of `stage` (of a run that began at `start` cost) that each fail to lower
+// the stage's best by more than the margin.
+uint32_t trailing_stalls(const std::vector<PassRecord>& stage, double start, double margin) {
+  double best = start;
+  uint32_t stalls = 0;
+  for (const PassRecord& p : stage) {
+    stalls = p.cost < best * (1.0 - margin) ? 0 : stalls + 1;
+    best = std::min(best, p.cost);
+  }
+  return stalls;
+}
+
+TEST(InsertionOptimizer, StagesRunInOrderAndTheSequentialStageHandsOverAfterTwoStalls) {
+  constexpr double kHandOverMargin = 3e-4;  // the optimizer's, for stages that hand over
+  for (uint32_t random_after : {5u, 1u}) {
+    PrimitiveRefs refs = testing::random_refs(3000, 31);
+    Bvh bvh = build_sweep_sah(refs);
+    InsertionConfig cfg;
+    cfg.form = InsertionForm::regional;
+    cfg.random_after = random_after;
+    OptimizeReport r = optimize_insertion(bvh, cfg);
+    ASSERT_EQ(r.stop_reason, StopReason::converged);
+    const std::vector<std::vector<PassRecord>> stages = passes_by_stage(r);
+    ASSERT_EQ(stages.size(), 4u);
+    // The sequential stage starts from the tree the first stage left.
+    const double start = stages[0].back().best_cost;
+    EXPECT_EQ(trailing_stalls(stages[1], start, kHandOverMargin), std::min(random_after, 2u))
+        << "random_after " << random_after << ", " << stages[1].size() << " sequential passes";
+    // The first stage keeps the config's patience.
+    EXPECT_EQ(trailing_stalls(stages[0], r.initial_cost, kHandOverMargin), random_after);
+  }
+  PrimitiveRefs refs = testing::random_refs(3000, 32);
+  Bvh bvh = build_sweep_sah(refs);
+  InsertionConfig cfg;
+  cfg.form = InsertionForm::hybrid;
+  OptimizeReport r = optimize_insertion(bvh, cfg);
+  EXPECT_EQ(passes_by_stage(r).size(), 2u);
+  cfg.form = InsertionForm::parallel;
+  r = optimize_insertion(bvh, cfg);
+  EXPECT_EQ(passes_by_stage(r).size(), 1u);
+}
+
 TEST(InsertionOptimizer, ConvergesWithoutAPassLimit) {
   PrimitiveRefs refs = testing::random_refs(1000, 14);
   Bvh bvh = build_sweep_sah(refs);

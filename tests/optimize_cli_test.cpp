@@ -66,7 +66,7 @@ TEST_F(OptimizeCli, SceneToAnnealedFileWithTraceAndJson) {
 
   std::vector<std::string> rows = lines(slurp(csv));
   ASSERT_FALSE(rows.empty());
-  EXPECT_EQ(rows[0], "pass,cost,best_cost,temperature,moves,seconds");
+  EXPECT_EQ(rows[0], "pass,cost,best_cost,temperature,moves,seconds,stage");
   EXPECT_EQ(rows.size(), j["passes"].get<size_t>() + 2);  // header, pass 0 (the input), every pass
 }
 

@@ -89,7 +89,8 @@ struct InsertionConfig : OptimizerConfig {
   double batch = 0.01;
   InsertionMeasure measure = InsertionMeasure::area;
   // Passes without a lower cost before selection turns random for the rest of the stage
-  // (p_R), and before the stage stops (p_T); the paper's 5 and 10.
+  // (p_R), and before the stage stops (p_T); the paper's 5 and 10. (The regional form's
+  // sequential stage hands over to the regional passes after at most 2.)
   uint32_t random_after = 5;
   uint32_t stop_after = 10;
   // A pass counts as an improvement only when it lowers the best cost by more than this

@@ -16,6 +16,10 @@ struct PassRecord {
   double temperature = 0.0;  // annealing only; 0 otherwise
   uint64_t moves = 0;        // moves applied in this pass
   double seconds = 0.0;      // elapsed since the optimizer started
+  // Which stage of the method ran the pass, from 0: insertion's forms run several in turn
+  // (hybrid: sequential, then parallel; regional: parallel and sequential by the measure,
+  // regional, parallel); the other methods have one.
+  uint32_t stage = 0;
 };
 
 // Why an optimizer stopped.

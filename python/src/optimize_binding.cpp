@@ -165,6 +165,8 @@ void register_optimize(py::class_<Tree>& tree) {
       .def_property_readonly("pass_moves", [](const Report& r) { return per_pass(r, [](const PassRecord& p) { return p.moves; }); })
       .def_property_readonly("pass_seconds", [](const Report& r) { return per_pass(r, [](const PassRecord& p) { return p.seconds; }); },
                              "Seconds since the start at the end of each pass")
+      .def_property_readonly("pass_stage", [](const Report& r) { return per_pass(r, [](const PassRecord& p) { return p.stage; }); },
+                             "The method's stage that ran each pass, from 0 (insertion's forms run several in turn)")
       .def("__repr__", [](const Report& r) {
         return "<OptimizeReport " + r.method + ": cost " + std::to_string(r.report.initial_cost) + " -> " +
                std::to_string(r.report.final_cost) + " in " + std::to_string(r.report.passes) + " passes (" +

@@ -76,6 +76,9 @@ def test_optimize_equals_the_command_line(cli, tmp_path, scene, method, args):
     assert report.passes == ref["passes"] and report.moves == ref["moves"]
     assert report.cost.shape == (report.passes,) and report.cost.dtype == np.float64
     assert report.best_cost[-1] <= report.initial_cost
+    # Stages from 0, in order; insertion on this scene runs the hybrid form's two.
+    assert report.pass_stage[0] == 0 and (np.diff(report.pass_stage) >= 0).all()
+    assert report.pass_stage[-1] == (1 if method == "insertion" else 0)
     bvh.validate()
     bvh.save(tmp_path / "b.bvh")
     np.testing.assert_array_equal(bvhopt.load(tmp_path / "a.bvh").nodes, bvhopt.load(tmp_path / "b.bvh").nodes)

@@ -89,6 +89,7 @@ class PassDriver {
     if (!current_is_best && best_tree) work.restore(std::move(*best_tree));
     report_.final_cost = work.cost();
     check_finite_cost(report_.final_cost, "optimize");
+    ++stage_;
   }
 
   // After the last stage (or instead of any): the report, with the total time.
@@ -113,6 +114,7 @@ class PassDriver {
     rec.temperature = r.temperature;
     rec.moves = r.moves;
     rec.seconds = elapsed();
+    rec.stage = stage_;
     report_.trace.push_back(rec);
     report_.moves += r.moves;
     if (limits_.on_pass) limits_.on_pass(rec);
@@ -134,6 +136,7 @@ class PassDriver {
   const OptimizeLimits& limits_;
   OptimizeReport report_;
   double best_ = 0.0;  // lowest cost of the whole run, for the records
+  uint32_t stage_ = 0;  // run() calls finished: the stage the next records belong to
 };
 
 }  // namespace bvhopt::detail
