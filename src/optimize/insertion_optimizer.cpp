@@ -684,10 +684,11 @@ std::vector<Stage> stages_of(InsertionForm form, size_t node_count) {
   // The sequential stage hands over after two passes without progress, not five: by then its
   // passes by the measure only oscillate (hall 4M: five passes of 0.1 s each above the best
   // cost), while the regional passes after it gain about as much per pass in 0.06 s. Against
-  // five, two runs each at 1M and 4M triangles: better within 1x the build time (1M 262.1-262.5
-  // against 263.4-263.6, 4M 368.55 against 370.2-372.8) and within 5x, converged sooner (1M
-  // 7.1-7.2 s against 8.2-9.2, 4M 31.2-31.8 against 33.9-36.8) at 252.26 against 252.12 and
-  // the same 354.59.
+  // five, two runs each at 1M and 4M triangles (runs limited to 1x the build time: 1M
+  // 260.9-261.1 against 261.3-261.5, 4M 367.87 against 369.3-370.6), lower within 5x too and
+  // converged sooner (1M 7.1-7.2 s against 8.2-9.2, 4M 31.2-31.8 against 33.9-36.8), at
+  // 252.26 against 252.12 and the same 354.59. One pass cut the stage at its first
+  // oscillation (1M converged at 257.24); three landed between.
   const std::vector<Stage> regional = {{PassKind::parallel, true},
                                        {PassKind::sequential, true, 2},
                                        {PassKind::regional},
