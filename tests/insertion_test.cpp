@@ -679,10 +679,7 @@ TEST(InsertionOptimizer, PassLimitEndsAnOscillatingRun) {
   }
 }
 
-// Where each stage ends, read from the trace's stage numbers: the hybrid form's two stages
-// and the regional form's four run in order, and the regional form's sequential stage (its
-// second) hands over at its second pass in a row that does not lower the stage's best cost
-// by the hand-over margin, or at the first where random_after is 1.
+// The trace's passes, one list per stage; the stage numbers must run 0, 1, ... in order.
 std::vector<std::vector<PassRecord>> passes_by_stage(const OptimizeReport& r) {
   std::vector<std::vector<PassRecord>> stages;
   for (const PassRecord& p : r.trace) {
@@ -705,6 +702,10 @@ uint32_t trailing_stalls(const std::vector<PassRecord>& stage, double start, dou
   return stalls;
 }
 
+// Where each stage ends, read from the trace's stage numbers: the hybrid form's two stages
+// and the regional form's four run in order, and the regional form's sequential stage (its
+// second) hands over at its second pass in a row that does not lower the stage's best cost
+// by the hand-over margin, or at the first where random_after is 1.
 TEST(InsertionOptimizer, StagesRunInOrderAndTheSequentialStageHandsOverAfterTwoStalls) {
   constexpr double kHandOverMargin = 3e-4;  // the optimizer's, for stages that hand over
   for (uint32_t random_after : {5u, 1u}) {

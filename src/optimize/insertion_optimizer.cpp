@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <limits>
 #include <bit>
 #include <cmath>
 #include <functional>
@@ -97,8 +98,8 @@ enum class PassKind { sequential, regional, parallel };
 struct Stage {
   PassKind kind;
   bool until_measure_stalls = false;
-  // Passes without progress that end such a stage, at most; 0: the config's random_after.
-  uint32_t stall_patience = 0;
+  // A cap on the config's random_after, the passes without progress that end such a stage.
+  uint32_t max_stalls = std::numeric_limits<uint32_t>::max();
 };
 
 // One stage of the optimizer (one form) over the tree, and its passes for the pass driver.
@@ -166,9 +167,8 @@ class InsertionOptimizer {
       without_improvement_ = 0;
     else
       ++without_improvement_;
-    const uint32_t patience = !stage_.until_measure_stalls ? config_.stop_after
-                              : stage_.stall_patience != 0 ? std::min(stage_.stall_patience, config_.random_after)
-                                                           : config_.random_after;
+    const uint32_t patience =
+        stage_.until_measure_stalls ? std::min(stage_.max_stalls, config_.random_after) : config_.stop_after;
     return {c, moves, 0.0, without_improvement_ >= patience};
   }
 
