@@ -68,6 +68,7 @@ Options parse(int argc, char** argv) {
 
 struct Samples {
   std::vector<double> build, collapse, layout, build_cpu, wide_cpu;
+  WideLayoutStats wide;  // the same in every round (the layout is deterministic)
 };
 
 int run(const Options& opt) {
@@ -75,8 +76,8 @@ int run(const Options& opt) {
   std::printf("# layout_bench: wall-clock medians of %d rounds; collapse + layout of the sweep tree compacted into "
               "leaves of up to %u, %u-wide\n",
               opt.repeats, opt.leaf, opt.width);
-  std::printf("%-22s %3s %9s | %10s %10s %10s | %7s %7s\n", "scene", "thr", "triangles", "build ms", "collapse",
-              "layout", "ratio", "cpu");
+  std::printf("%-22s %3s %9s | %10s %10s %10s | %7s %7s | %7s %7s\n", "scene", "thr", "triangles", "build ms",
+              "collapse", "layout", "ratio", "cpu", "B/tri", "slots");
   for (const std::string& spec : opt.scenes) {
     const Mesh mesh = load_mesh_file(spec);
     const PrimitiveRefs refs = make_references(mesh);
@@ -100,15 +101,23 @@ int run(const Options& opt) {
         s.wide_cpu.push_back(process_cpu_seconds() - cpu0);
         s.collapse.push_back(wide.stats().collapse_seconds);
         s.layout.push_back(wide.stats().layout_seconds);
+        s.wide = wide.stats();
       }
       const double build = median(s.build), collapse = median(s.collapse), layout = median(s.layout);
       const double ratio = (collapse + layout) / build, cpu_ratio = median(s.wide_cpu) / median(s.build_cpu);
-      std::printf("%-22s %3d %9zu | %10.1f %10.1f %10.1f | %6.1f%% %6.1f%%\n", name.c_str(), threads,
-                  mesh.triangle_count(), 1e3 * build, 1e3 * collapse, 1e3 * layout, 100.0 * ratio, 100.0 * cpu_ratio);
+      // Bytes of the wide layout per triangle, and triangle slots per triangle (padding of
+      // leaf blocks): what the layout writes, beside how long it takes.
+      const double bytes_per_triangle = double(s.wide.bytes) / double(mesh.triangle_count());
+      const double slots_per_triangle = double(s.wide.triangle_slots) / double(mesh.triangle_count());
+      std::printf("%-22s %3d %9zu | %10.1f %10.1f %10.1f | %6.1f%% %6.1f%% | %7.1f %7.2f\n", name.c_str(), threads,
+                  mesh.triangle_count(), 1e3 * build, 1e3 * collapse, 1e3 * layout, 100.0 * ratio, 100.0 * cpu_ratio,
+                  bytes_per_triangle, slots_per_triangle);
       std::fflush(stdout);
       rows.push_back({{"scene", name}, {"threads", threads}, {"triangles", mesh.triangle_count()},
                       {"build_seconds", build}, {"collapse_seconds", collapse}, {"layout_seconds", layout},
-                      {"ratio", ratio}, {"cpu_ratio", cpu_ratio}});
+                      {"ratio", ratio}, {"cpu_ratio", cpu_ratio},
+                      {"wide_bytes", s.wide.bytes}, {"wide_nodes", s.wide.nodes}, {"wide_blocks", s.wide.blocks},
+                      {"bytes_per_triangle", bytes_per_triangle}});
     }
   }
   if (!opt.json_path.empty()) write_json(opt.json_path, {{"bench", "layout_bench"}, {"rows", rows}});

@@ -111,6 +111,26 @@ void expect_valid(const CollapsedBvh& w, const FlatBvh& bvh) {
   // Without subdivision every triangle is referenced once, so it lies in exactly one leaf.
   std::multiset<uint32_t> want(bvh.triangle_ids.begin(), bvh.triangle_ids.end());
   EXPECT_EQ(seen, want);
+  // Numbered as one depth-first walk (the layout places subtrees by it): from the root,
+  // inner children in slot order, each node numbered when reached and each leaf when its
+  // parent is; the leaves' triangle ranges follow one another.
+  uint32_t next_node = 0, next_leaf = 0;
+  std::vector<uint32_t> todo{0};
+  while (!todo.empty()) {
+    const uint32_t n = todo.back();
+    todo.pop_back();
+    ASSERT_EQ(n, next_node++);
+    for (uint32_t s = w.child_begin[n]; s < w.child_begin[n + 1]; ++s) {
+      if (w.child_is_leaf[s]) {
+        ASSERT_EQ(w.child_index[s], next_leaf++);
+      }
+    }
+    for (uint32_t s = w.child_begin[n + 1]; s-- > w.child_begin[n];)
+      if (!w.child_is_leaf[s]) todo.push_back(w.child_index[s]);
+  }
+  EXPECT_EQ(next_node, w.nodes.size());
+  EXPECT_EQ(next_leaf, w.leaf_count());
+  EXPECT_EQ(w.leaf_begin.back(), w.leaf_triangles.size());
 }
 
 TEST(WideCollapse, DynamicProgramIsOptimalAgainstExhaustiveEnumeration) {
@@ -178,6 +198,10 @@ TEST(WideCollapse, SameResultOnAnyThreadCount) {
     tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
     two = collapse_to_wide(bvh);
   }
+  // Large enough that the walk is cut into segments (wide_collapse.cpp): they must join
+  // into one depth-first numbering.
+  expect_valid(one, bvh);
+  expect_valid(two, bvh);
   EXPECT_EQ(one.sah_cost, two.sah_cost);
   EXPECT_EQ(one.children, two.children);
   EXPECT_EQ(one.leaf_triangles, two.leaf_triangles);
