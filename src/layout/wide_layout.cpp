@@ -38,7 +38,7 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 // the TLB (Embree allocates its BVH the same way). The rounding is for the time it takes to
 // write: a partial huge page at the end is backed by 4 KiB pages, each a fault of its own,
 // and in this VM a fault costs about 9 us (2CylinderEngine, 7.6 MB: the layout took 7.4 ms
-// with its last 1.6 MB on small pages, 3.5 ms rounded up; writing 7.6 MB of fresh memory
+// with its last 1.6 MB on small pages, 3.9 ms rounded up; writing 7.6 MB of fresh memory
 // took 3.2 ms against 0.35). It costs at most 2 MiB of memory, under half the block. Not
 // cleared: the writers fill every byte, so the pages are first touched by the threads that
 // write them.
