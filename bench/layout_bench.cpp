@@ -9,7 +9,10 @@
 // `--leaf` (default 8: the sweep tree compacted into leaves of up to 8, as traced) into
 // `--width`-wide nodes. Each figure is the median of its R samples, wall time (the layout
 // runs on several threads); the process CPU time ratio is printed beside it, since on a
-// shared machine wall times also count other processes.
+// shared machine wall times also count other processes. Then the wide layout's bytes and
+// triangle slots (4 per leaf block) per triangle. The rounds reuse memory freed by the
+// rounds before, so this times the warm case; trace_bench prints each tree's layout done
+// once, cold.
 #include <tbb/global_control.h>
 
 #include <cstdio>
