@@ -148,9 +148,9 @@ class CollapseWriter {
     const uint32_t cut_below = std::max(kMinSegmentNodes, flat_nodes / 6);
     struct Todo {
       uint32_t flat;
-      Link link;  // the parent's slot to point at this segment (segment kNoSet: the root)
+      uint32_t segment, slot;  // the parent's slot to point at this segment (kNoSet: the root)
     };
-    std::vector<Todo> todo{{0, {kNoSet, kNoSet, 0}}};
+    std::vector<Todo> todo{{0, kNoSet, kNoSet}};
     std::vector<Pending> inner;
     while (!todo.empty()) {
       const Todo at = todo.back();
@@ -158,12 +158,12 @@ class CollapseWriter {
       const uint32_t s = uint32_t(segments.size());
       segments.emplace_back();
       segments[s].root = at.flat;
-      if (at.link.segment != kNoSet) links.push_back({at.link.segment, at.link.slot, s});
+      if (at.segment != kNoSet) links.push_back({at.segment, at.slot, s});
       walked.push_back(!bvh_.nodes[at.flat].is_leaf() && subtree_end(at.flat) - at.flat >= cut_below);
       if (!walked[s]) continue;
       inner.clear();
       walk(at.flat, segments[s], &inner, children_of, is_leaf, distinct);
-      for (size_t k = inner.size(); k-- > 0;) todo.push_back({inner[k].flat, {s, inner[k].slot, 0}});
+      for (size_t k = inner.size(); k-- > 0;) todo.push_back({inner[k].flat, s, inner[k].slot});
     }
     tbb::parallel_for(size_t(0), segments.size(), [&](size_t k) {
       // Each into a piece of the task's own, moved into place at the end: the segments lie
