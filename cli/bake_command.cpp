@@ -89,6 +89,7 @@ struct BakeStart {
   uint64_t leaves = 0;
   uint64_t references = 0;  // made by the builder (before the collapse keeps one per triangle in a leaf)
   std::string insertion_form;  // the form the optimizer took (hybrid resolves by the tree's size)
+  bool insertion_parallel_start = false;  // the regional form's parallel first stage ran
   Bvh bvh;
   PrimitiveRefs refs;
 };
@@ -207,11 +208,14 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOptio
   InsertionConfig insertion;
   insertion.cost = cost;
   insertion.limits.time_limit = s.budget_seconds;
-  // Within one build time the paper's sequential passes gain the most (hall, 1M triangles:
-  // 266.1, against 266.0-269.8 for the regional form that the default takes on trees that
-  // large; that form is ahead from about 1.5 build times on, and converges lower).
-  if (opt.quality == "fast") insertion.form = InsertionForm::sequential;
-  s.insertion_form = std::string(form_name(resolved_form(insertion.form, s.bvh.nodes.size())));
+  // Within one build time the sequential passes by the measure gain the most at first: fast
+  // starts with them, without the regional form's parallel first stage (hall, 10M triangles,
+  // 9 s: 468.29, against 481.98 with that stage and 477.50 for the paper's sequential form,
+  // which fast took before the rotation sweeps).
+  if (opt.quality == "fast") insertion.parallel_start = false;
+  const InsertionForm form = resolved_form(insertion.form, s.bvh.nodes.size());
+  s.insertion_form = std::string(form_name(form));
+  s.insertion_parallel_start = form == InsertionForm::regional && insertion.parallel_start;
   GainEstimate gain(s.cost_built);
   insertion.limits.on_pass = [&](const PassRecord& p) {
     gain.add(p.best_cost);
@@ -307,6 +311,7 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
                       {"passes", s.report.passes},
                       {"stop_reason", std::string(stop_reason_name(s.report.stop_reason))},
                       {"insertion_form", s.insertion_form},
+                      {"insertion_parallel_start", s.insertion_parallel_start},
                       {"leaves", s.leaves}});
   }
   print_json({{"scene", opt.scene.spec},
@@ -326,6 +331,7 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
               {"passes", best.report.passes},
               {"stop_reason", std::string(stop_reason_name(best.report.stop_reason))},
               {"insertion_form", best.insertion_form},
+              {"insertion_parallel_start", best.insertion_parallel_start},
               {"leaves", best.leaves},
               {"start_leaf_size", best.spec.leaf_size},
               {"start_spatial_max", best.spec.spatial_max},

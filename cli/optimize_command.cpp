@@ -45,6 +45,8 @@ struct OptimizeOptions {
   std::string time_budget;  // --time-budget: seconds or a multiple of the build time; empty for none
   AnnealConfig anneal;
   bool no_keep_best = false;
+  bool no_rotations = false;
+  bool no_parallel_start = false;
   InsertionConfig insertion;
   std::string measure = std::string(measure_name(InsertionConfig{}.measure));
   std::string form = std::string(form_name(InsertionConfig{}.form));
@@ -100,10 +102,17 @@ void add_method_options(CLI::App* cmd, OptimizeOptions& opt) {
       ->check(CLI::IsMember(measures))
       ->capture_default_str();
   cmd->add_option("--form", opt.form,
-                  "insertion: sequential (the paper's) | parallel (deterministic) | hybrid (the first, then the second; "
-                  "regional from 1M nodes) | regional (the paper's passes on all threads, in disjoint subtrees)")
+                  "insertion: sequential (the paper's) | parallel (deterministic) | hybrid (the first, then the second, then "
+                  "rotation sweeps; regional from 1M nodes) | regional (the paper's passes on all threads, in disjoint "
+                  "subtrees, with rotation sweeps)")
       ->check(CLI::IsMember(names_of(insertion_forms(), form_name)))
       ->capture_default_str();
+  cmd->add_flag("--no-rotations", opt.no_rotations,
+                "insertion: leave out the rotation sweeps (Kensler's hill climbing) that the hybrid and regional forms "
+                "run after their insertion stages");
+  cmd->add_flag("--no-parallel-start", opt.no_parallel_start,
+                "insertion: the regional form starts with its sequential passes, without the parallel first stage "
+                "(more gain in short runs on very large trees, as bake --quality fast; a higher converged cost)");
   cmd->add_option("--random-after", opt.insertion.random_after,
                   "insertion: passes without improvement before random selection (p_R)")
       ->check(whole_number(0, UINT32_MAX))
@@ -135,6 +144,8 @@ OptimizeReport run_method(Bvh& bvh, OptimizerMethod method, const OptimizeOption
       if (cfg.limits.max_passes == 0) cfg.limits.max_passes = default_cap;  // the cap stays as a safety net
       cfg.measure = parse_measure(opt.measure).value_or(cfg.measure);
       cfg.form = parse_form(opt.form).value_or(cfg.form);
+      cfg.rotations = !opt.no_rotations;
+      cfg.parallel_start = !opt.no_parallel_start;
       return optimize_insertion(bvh, cfg);
     }
   }
@@ -223,9 +234,15 @@ void print_report_json(const OptimizeOptions& opt, const Loaded& in, const BvhFi
                   {"cost_trace", opt.trace_path},
                   {"output", opt.output}};
   // Which insertion form ran: hybrid takes another on large trees.
-  if (parse_optimizer_method(opt.method) == OptimizerMethod::insertion)
-    j["insertion_form"] = std::string(form_name(resolved_form(parse_form(opt.form).value_or(InsertionConfig{}.form),
-                                                              in.bvh.nodes.size())));
+  if (parse_optimizer_method(opt.method) == OptimizerMethod::insertion) {
+    const InsertionForm form =
+        resolved_form(parse_form(opt.form).value_or(InsertionConfig{}.form), in.bvh.nodes.size());
+    j["insertion_form"] = std::string(form_name(form));
+    // Whether the run swept rotations between its insertion stages (the regional form does,
+    // and hybrid's small-tree stages, unless --no-rotations).
+    j["insertion_rotations"] = !opt.no_rotations && form != InsertionForm::sequential && form != InsertionForm::parallel;
+    j["insertion_parallel_start"] = !opt.no_parallel_start && form == InsertionForm::regional;
+  }
   print_json(j);
 }
 

@@ -702,10 +702,12 @@ uint32_t trailing_stalls(const std::vector<PassRecord>& stage, double start, dou
   return stalls;
 }
 
-// Where each stage ends, read from the trace's stage numbers: the hybrid form's two stages
-// and the regional form's four run in order, and the regional form's sequential stage (its
-// second) hands over at its second pass in a row that does not lower the stage's best cost
-// by the hand-over margin, or at the first where random_after is 1.
+// Where each stage ends, read from the trace's stage numbers: the hybrid form's stages
+// (sequential, parallel, rotation sweeps) and the regional form's seven (parallel and
+// sequential by the measure, sweeps, regional, sweeps, parallel, sweeps) run in order, and
+// the regional form's sequential stage (its second) hands over at its second pass in a row
+// that does not lower the stage's best cost by the hand-over margin, or at the first where
+// random_after is 1. Without rotations, the insertion stages alone.
 TEST(InsertionOptimizer, StagesRunInOrderAndTheSequentialStageHandsOverAfterTwoStalls) {
   constexpr double kHandOverMargin = 3e-4;  // the optimizer's, for stages that hand over
   for (uint32_t random_after : {5u, 1u}) {
@@ -717,23 +719,102 @@ TEST(InsertionOptimizer, StagesRunInOrderAndTheSequentialStageHandsOverAfterTwoS
     OptimizeReport r = optimize_insertion(bvh, cfg);
     ASSERT_EQ(r.stop_reason, StopReason::converged);
     const std::vector<std::vector<PassRecord>> stages = passes_by_stage(r);
-    ASSERT_EQ(stages.size(), 4u);
+    ASSERT_EQ(stages.size(), 7u);
     // The sequential stage starts from the tree the first stage left.
     const double start = stages[0].back().best_cost;
     EXPECT_EQ(trailing_stalls(stages[1], start, kHandOverMargin), std::min(random_after, 2u))
         << "random_after " << random_after << ", " << stages[1].size() << " sequential passes";
     // The first stage keeps the config's patience.
     EXPECT_EQ(trailing_stalls(stages[0], r.initial_cost, kHandOverMargin), random_after);
+    // Each stage of sweeps never raises the cost, and ends at its first sweep that gains
+    // less than the margin.
+    for (size_t k : {2u, 4u, 6u}) {
+      double prev = stages[k - 1].back().best_cost;
+      const double stage_start = prev;
+      for (const PassRecord& p : stages[k]) {
+        EXPECT_LE(p.cost, prev) << "stage " << k << ", pass " << p.pass;
+        prev = p.cost;
+      }
+      EXPECT_EQ(trailing_stalls(stages[k], stage_start, kHandOverMargin), 1u) << "stage " << k;
+    }
+    bvh = build_sweep_sah(refs);
+    cfg.rotations = false;
+    r = optimize_insertion(bvh, cfg);
+    EXPECT_EQ(passes_by_stage(r).size(), 4u);
+    // Without the parallel start, the sequential passes by the measure come first: each
+    // updates the batch's candidates one by one (a parallel pass applies only some).
+    bvh = build_sweep_sah(refs);
+    cfg.rotations = true;
+    cfg.parallel_start = false;
+    r = optimize_insertion(bvh, cfg);
+    const std::vector<std::vector<PassRecord>> without = passes_by_stage(r);
+    ASSERT_EQ(without.size(), 6u);
+    const uint64_t batch = static_cast<uint64_t>(std::ceil(cfg.batch * (refs.size() - 1)));
+    EXPECT_EQ(without[0].front().moves, batch);
+    EXPECT_LT(stages[0].front().moves, batch);
+    cfg.parallel_start = true;
   }
   PrimitiveRefs refs = testing::random_refs(3000, 32);
   Bvh bvh = build_sweep_sah(refs);
   InsertionConfig cfg;
   cfg.form = InsertionForm::hybrid;
   OptimizeReport r = optimize_insertion(bvh, cfg);
+  EXPECT_EQ(passes_by_stage(r).size(), 3u);
+  cfg.rotations = false;
+  bvh = build_sweep_sah(refs);
+  r = optimize_insertion(bvh, cfg);
   EXPECT_EQ(passes_by_stage(r).size(), 2u);
   cfg.form = InsertionForm::parallel;
+  cfg.rotations = true;  // the paper's forms never sweep
   r = optimize_insertion(bvh, cfg);
   EXPECT_EQ(passes_by_stage(r).size(), 1u);
+}
+
+// The hybrid form's sweeps come after its insertion stages, which run as they would
+// without them: the final tree can only be cheaper, and every sweep keeps the tree valid
+// and its tracked cost that of a recount (also in the regional form, whose sweeps run in
+// parallel over its regions).
+TEST(InsertionOptimizer, RotationSweepsOnlyLowerTheTreeAndKeepItValid) {
+  for (int seed : {41, 42, 43}) {
+    PrimitiveRefs refs = testing::random_refs(2000, seed);
+    double final_cost[2];
+    for (int rotations = 0; rotations < 2; ++rotations) {
+      Bvh bvh = build_sweep_sah(refs);
+      InsertionConfig cfg;
+      cfg.form = InsertionForm::hybrid;
+      cfg.rotations = rotations == 1;
+      uint64_t checked = 0;
+      auto after_move = [&](const Bvh& t, double tracked) {
+        ValidationReport v = validate(t, refs);
+        ASSERT_TRUE(v.ok()) << v.summary();
+        ASSERT_LT(relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
+        ++checked;
+      };
+      OptimizeReport r = testing::optimize_insertion_observed(bvh, cfg, after_move);
+      ASSERT_EQ(r.stop_reason, StopReason::converged);
+      EXPECT_GT(checked, 0u);
+      EXPECT_LT(relative_gap(r.final_cost, sah_cost(bvh)), 1e-9);
+      final_cost[rotations] = r.final_cost;
+    }
+    EXPECT_LE(final_cost[1], final_cost[0]) << "seed " << seed;
+  }
+  // The regional form, to convergence: its sweeps run over several regions.
+  PrimitiveRefs refs = testing::random_refs(6000, 44);
+  Bvh bvh = build_spatial_median(refs);
+  InsertionConfig cfg;
+  cfg.form = InsertionForm::regional;
+  cfg.random_after = 1;
+  cfg.stop_after = 3;
+  uint32_t sweeps = 0;
+  auto after_move = [&](const Bvh& t, double tracked) {
+    ASSERT_TRUE(validate(t, refs).ok());
+    ASSERT_LT(relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
+  };
+  cfg.limits.on_pass = [&](const PassRecord& p) { sweeps += p.stage == 2 || p.stage == 4 || p.stage == 6; };
+  OptimizeReport r = testing::optimize_insertion_observed(bvh, cfg, after_move);
+  EXPECT_EQ(r.stop_reason, StopReason::converged);
+  EXPECT_GE(sweeps, 3u);
+  EXPECT_TRUE(validate(bvh, refs).ok());
 }
 
 TEST(InsertionOptimizer, ConvergesWithoutAPassLimit) {

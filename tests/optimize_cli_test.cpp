@@ -122,6 +122,8 @@ TEST_F(OptimizeCli, DefaultMethodIsInsertionAndTimeBudgetStopsOnTheBestTree) {
   nlohmann::json j = nlohmann::json::parse(out);
   EXPECT_EQ(j["method"], "insertion");
   EXPECT_EQ(j["insertion_form"], "hybrid");  // a small tree: hybrid stays itself
+  EXPECT_EQ(j["insertion_rotations"], true);
+  EXPECT_EQ(j["insertion_parallel_start"], false);  // only the regional form has one
   EXPECT_EQ(j["stop_reason"], "time limit");
   EXPECT_EQ(j["passes"], 1);
   EXPECT_LE(j["cost_after"].get<double>(), j["cost_before"].get<double>());
@@ -269,8 +271,11 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
   // Another builder on request, and sweep for the other qualities.
   ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --quality fast --json -o " + a.string(), &out, &err), 0) << err;
   EXPECT_EQ(nlohmann::json::parse(out)["builder"], "sweep");
-  EXPECT_EQ(nlohmann::json::parse(out)["insertion_form"], "sequential");  // fast: the paper's form
-  EXPECT_EQ(nlohmann::json::parse(out)["starts"][0]["insertion_form"], "sequential");
+  // fast: the default form without the regional form's parallel first stage (a small tree:
+  // hybrid stays itself and has no such stage).
+  EXPECT_EQ(nlohmann::json::parse(out)["insertion_form"], "hybrid");
+  EXPECT_EQ(nlohmann::json::parse(out)["starts"][0]["insertion_form"], "hybrid");
+  EXPECT_EQ(nlohmann::json::parse(out)["insertion_parallel_start"], false);
   ASSERT_EQ(run("bake 'builtin:atrium?triangles=4000' --builder sbvh --budget 1.1 --json -o " + a.string(), &out, &err),
             0)
       << err;

@@ -82,7 +82,8 @@ ExperimentConfig quick_experiment_config(ExperimentConfig base);
 // which the cost does not fall (any fall counts: no minimum improvement), no pass cap.
 InsertionConfig bittner_paper_insertion_config(uint64_t seed);
 // Our own form, a row of its own: the library's defaults (sequential, then a parallel
-// polish; an improvement must exceed min_improvement; at most max_passes).
+// polish and rotation sweeps; an improvement must exceed min_improvement; at most
+// max_passes).
 InsertionConfig hybrid_insertion_config(uint64_t seed);
 
 // Runs this shard's part of the grid and writes results.json, the CSVs, the heat maps, the

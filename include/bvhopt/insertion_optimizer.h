@@ -47,20 +47,22 @@ enum class InsertionForm {
   // count.
   parallel,
   // The sequential form until it stops, then the parallel form from its best tree: the fast
-  // large gains of the first, then the monotone polish of the second. The default: lowest
+  // large gains of the first, then the monotone polish of the second; then rotation sweeps
+  // (InsertionConfig::rotations), which only lower the final tree. The default: lowest
   // final cost of the three on 10 of the 11 shared scenes (bench/insertion_bench), mostly in
   // about the time of the parallel form alone. On trees of kRegionalFrom nodes or more
   // (half a million triangles), the regional form instead.
   hybrid,
-  // For large trees, the paper's sequential passes on all threads. Four stages: parallel
-  // passes by the measure until it stalls, sequential ones by the measure until it stalls
-  // again, then regional passes (random selection as in the paper; the tree is cut at a
-  // fixed depth into disjoint subtrees of about 32k nodes, and each candidate inside one is
+  // For large trees, the paper's sequential passes on all threads. Four insertion stages:
+  // parallel passes by the measure until it stalls, sequential ones by the measure until it
+  // stalls again, then regional passes (random selection as in the paper; the tree is cut at
+  // a fixed depth into disjoint subtrees of about 32k nodes, and each candidate inside one is
   // updated there, its children reinserted at the best place inside that subtree; the
   // subtrees run at once, each on its own candidates in order), then the parallel form as a
-  // polish. The tree does not depend on the thread count. Hall at 1M and 4M triangles, 2
-  // threads: converges 0.5-0.9 % lower than sequential-then-parallel in 0.55-0.8 of the
-  // time, but level with it or behind within one build time (docs/optimization-at-scale.md).
+  // polish. Rotation sweeps (InsertionConfig::rotations) follow the sequential stage, the
+  // regional one and the polish. The tree does not depend on the thread count. Hall at 1M
+  // and 4M triangles, 2 threads: ahead of sequential-then-parallel from one build time on,
+  // and converges lower in less time (docs/optimization-at-scale.md).
   regional,
 };
 
@@ -98,6 +100,19 @@ struct InsertionConfig : OptimizerConfig {
   // endless tiny gains and never turn random or stop.
   double min_improvement = 1e-5;
   InsertionForm form = InsertionForm::hybrid;
+  // The hybrid and regional forms follow their insertion stages with sweeps of Kensler's
+  // rotations (hill climbing: at every inner node the child/grandchild swap that most lowers
+  // its children's areas), each stage of sweeps until one gains less than 0.03 %: after the
+  // sequential stage, after the regional one, and at the end. false: the insertion stages
+  // alone. (The sequential and parallel forms never sweep.)
+  bool rotations = true;
+  // The regional form's first stage: parallel passes by the measure (true), or none, so that
+  // the sequential passes by the measure start at once (false). Those gain far more in the
+  // first seconds on very large trees, the parallel start ends lower in longer runs: hall,
+  // 10M triangles, 2 threads, 9 s (about one build time): 468.29 without it, 481.98 with it
+  // (477.50 for the sequential form); 1M triangles converged: 253.97 without, 251.88 with.
+  // bake --quality fast starts without it.
+  bool parallel_start = true;
 };
 
 // Optimizes `bvh` in place. Works on a tree from any builder and with any leaf sizes: leaves

@@ -85,7 +85,9 @@ const Setters<InsertionConfig>& insertion_options() {
       {"stop_after", set(&InsertionConfig::stop_after)},
       {"min_improvement", set(&InsertionConfig::min_improvement)},
       {"measure", [](InsertionConfig& c, const py::handle& v) { c.measure = parse_named(v, parse_measure, "measure"); }},
-      {"form", [](InsertionConfig& c, const py::handle& v) { c.form = parse_named(v, parse_form, "form"); }}};
+      {"form", [](InsertionConfig& c, const py::handle& v) { c.form = parse_named(v, parse_form, "form"); }},
+      {"rotations", set(&InsertionConfig::rotations)},
+      {"parallel_start", set(&InsertionConfig::parallel_start)}};
   return s;
 }
 
@@ -174,8 +176,8 @@ void register_optimize(py::class_<Tree>& tree) {
       });
   tree.def("optimize", &optimize, py::arg("method") = "insertion", py::arg("seed") = 1,
            py::arg("time_budget") = py::none(), py::arg("passes") = py::none(), py::arg("threads") = py::none(),
-           "Optimizes the tree in place with 'insertion' (options batch, measure, form, random_after, stop_after, "
-           "min_improvement), 'anneal' (schedule_passes, period, h, energy_scale, keep_best) or 'hill-climb'. "
+           "Optimizes the tree in place with 'insertion' (options batch, measure, form, rotations, parallel_start, "
+           "random_after, stop_after, min_improvement), 'anneal' (schedule_passes, period, h, energy_scale, keep_best) or 'hill-climb'. "
            "Ctrl-C stops after the current pass with the best tree so far (stop_reason 'interrupted').");
   tree.def_static("methods", [] {
     py::list names;

@@ -62,12 +62,12 @@ def test_sbvh_settings_equal_the_command_line(cli, tmp_path, scene, option, valu
     assert bvh.cost != bvhopt.build(scene, builder="sbvh").cost
 
 
-@pytest.mark.parametrize("method,args", [("insertion", []), ("hill-climb", []),
+@pytest.mark.parametrize("method,args", [("insertion", []), ("insertion", ["--no-rotations"]), ("hill-climb", []),
                                          ("anneal", ["--schedule-passes", "60"])])
 def test_optimize_equals_the_command_line(cli, tmp_path, scene, method, args):
     ref = run_cli(cli, "optimize", SCENE, "--method", method, "--seed", "7", *args, "-o", str(tmp_path / "a.bvh"))
     bvh = bvhopt.build(scene)
-    options = {"schedule_passes": 60} if method == "anneal" else {}
+    options = {"schedule_passes": 60} if method == "anneal" else {"rotations": False} if args else {}
     report = bvh.optimize(method, seed=7, **options)
     # The optimizer's tracked cost is a running sum, added in the order of the moves: it
     # equals a fresh sum up to rounding, and the command line's exactly.
@@ -76,9 +76,12 @@ def test_optimize_equals_the_command_line(cli, tmp_path, scene, method, args):
     assert report.passes == ref["passes"] and report.moves == ref["moves"]
     assert report.cost.shape == (report.passes,) and report.cost.dtype == np.float64
     assert report.best_cost[-1] <= report.initial_cost
-    # Stages from 0, in order; insertion on this scene runs the hybrid form's two.
+    # Stages from 0, in order; insertion on this scene runs the hybrid form's three (two
+    # without the rotation sweeps).
     assert report.pass_stage[0] == 0 and (np.diff(report.pass_stage) >= 0).all()
-    assert report.pass_stage[-1] == (1 if method == "insertion" else 0)
+    assert report.pass_stage[-1] == ((1 if args else 2) if method == "insertion" else 0)
+    if method == "insertion":
+        assert ref["insertion_rotations"] == (not args)
     bvh.validate()
     bvh.save(tmp_path / "b.bvh")
     np.testing.assert_array_equal(bvhopt.load(tmp_path / "a.bvh").nodes, bvhopt.load(tmp_path / "b.bvh").nodes)

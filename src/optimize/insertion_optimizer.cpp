@@ -15,6 +15,7 @@
 
 #include "bvhopt/random_stream.h"
 #include "bvhopt/testing/insertion_hooks.h"
+#include "bvhopt/tree_rotations.h"
 #include "optimize/find_by_name.h"
 #include "optimize/huge_page_backing.h"
 #include "optimize/largest_from_root.h"
@@ -90,8 +91,9 @@ struct Plan {
 
 // How a stage's passes update their candidates: one after another over the whole tree (the
 // paper's), one after another within each of many disjoint subtrees at once (regional), or
-// planned all at once and applied in order (parallel).
-enum class PassKind { sequential, regional, parallel };
+// planned all at once and applied in order (parallel). Or, with no candidates, a sweep of
+// Kensler's rotations over every inner node (rotation).
+enum class PassKind { sequential, regional, parallel, rotation };
 
 // One stage: its passes, and whether it ends where selection by the measure stalls (leaving
 // the random passes to the next stage) rather than by the paper's rule.
@@ -100,6 +102,11 @@ struct Stage {
   bool until_measure_stalls = false;
   // A cap on the config's random_after, the passes without progress that end such a stage.
   uint32_t max_stalls = std::numeric_limits<uint32_t>::max();
+  // For a stage that does not end where the measure stalls: when > 0, it ends after
+  // `patience` passes in a row that each lower its best cost by less than this fraction
+  // (rather than the config's stop_after passes under its min_improvement).
+  double hand_over_gain = 0.0;
+  uint32_t patience = 0;
 };
 
 // One stage of the optimizer (one form) over the tree, and its passes for the pass driver.
@@ -122,8 +129,10 @@ class InsertionOptimizer {
 
   // The sequential and regional forms can raise the cost (both children are out at once)
   // and oscillate near the end, so they keep the best tree they have seen. The parallel
-  // form never raises it.
-  bool keep_best_before(uint32_t /*pass*/) const { return stage_.kind != PassKind::parallel; }
+  // passes and the rotation sweeps never raise it.
+  bool keep_best_before(uint32_t /*pass*/) const {
+    return stage_.kind == PassKind::sequential || stage_.kind == PassKind::regional;
+  }
   // The best tree is kept as an undo log from it, not a copy: only one restore point is
   // ever live (the driver takes the next only after dropping the last), so the token is empty.
   struct Snapshot {};
@@ -140,9 +149,11 @@ class InsertionOptimizer {
     // regional form selects at random from the start: it follows a stage that ended where
     // the measure stalled.
     random_ = random_ || without_improvement_ >= config_.random_after || stage_.kind == PassKind::regional;
-    select(pass + 1, random_, candidates_);
+    if (stage_.kind != PassKind::rotation) select(pass + 1, random_, candidates_);
     uint64_t moves = 0;
-    if (stage_.kind == PassKind::parallel) {
+    if (stage_.kind == PassKind::rotation) {
+      moves = pass_rotations();
+    } else if (stage_.kind == PassKind::parallel) {
       moves = pass_parallel(candidates_);
     } else if (stage_.kind == PassKind::regional) {
       moves = pass_regional();
@@ -162,13 +173,16 @@ class InsertionOptimizer {
     // 1.5 build times on), and the converged cost is within the spread of the seed.
     constexpr double kHandOverImprovement = 3e-4;
     const double min_improvement =
-        stage_.until_measure_stalls ? std::max(config_.min_improvement, kHandOverImprovement) : config_.min_improvement;
+        stage_.until_measure_stalls  ? std::max(config_.min_improvement, kHandOverImprovement)
+        : stage_.hand_over_gain > 0 ? std::max(config_.min_improvement, stage_.hand_over_gain)
+                                    : config_.min_improvement;
     if (c < stage_best * (1.0 - min_improvement))
       without_improvement_ = 0;
     else
       ++without_improvement_;
-    const uint32_t patience =
-        stage_.until_measure_stalls ? std::min(stage_.max_stalls, config_.random_after) : config_.stop_after;
+    const uint32_t patience = stage_.until_measure_stalls  ? std::min(stage_.max_stalls, config_.random_after)
+                              : stage_.hand_over_gain > 0 ? std::min(stage_.patience, config_.stop_after)
+                                                          : config_.stop_after;
     return {c, moves, 0.0, without_improvement_ >= patience};
   }
 
@@ -179,6 +193,7 @@ class InsertionOptimizer {
   struct Scratch {
     std::vector<detail::SearchEntry> heap;
     std::vector<uint32_t> path;
+    std::vector<uint64_t> sweep;  // a rotation sweep's stack
   };
   struct Scope {
     double* area;
@@ -355,6 +370,104 @@ class InsertionOptimizer {
       if (undo_.size() >= undo_limit() && !stay_within_log()) break;
     }
     return moves;
+  }
+
+  // A sweep of Kensler's hill climbing: at every inner node, once its subtree is done, the
+  // one of the six child/grandchild swaps that most lowers the sum of its two children's
+  // areas, if any does. A swap keeps the node's leaves, hence its box and everything above
+  // it, so the regions are swept at once, each bottom-up, and then the nodes above them;
+  // each region's area change is added in region order: the tree and its tracked cost do
+  // not depend on the thread count.
+  //
+  // Why: the insertion passes leave many small local improvements that a swap makes at
+  // once. On the hall at 1M triangles, the first sweep after the sequential stage took the
+  // cost from 264.1 to 261.9 in about 30 ms on 2 threads, where a regional pass of 15 ms
+  // gains about 0.15 (docs/optimization-at-scale.md).
+  uint64_t pass_rotations() {
+    cut_regions();
+    const size_t regions = region_roots_.size();
+    region_area_.assign(regions, 0.0);
+    region_moves_.assign(regions, 0);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, regions, 1), [&](const tbb::blocked_range<size_t>& r) {
+      Scratch& scratch = region_scratch_.local();
+      for (size_t j = r.begin(); j < r.end(); ++j)
+        region_moves_[j] = rotate_subtree(region_roots_[j], false, region_area_[j], scratch.sweep);
+    });
+    uint64_t moves = 0;
+    for (size_t j = 0; j < regions; ++j) {
+      inner_area_ += region_area_[j];
+      moves += region_moves_[j];
+    }
+    moves += rotate_subtree(bvh_.root, true, inner_area_, scratch_.sweep);
+    notify_move();
+    return moves;
+  }
+
+  // Post-order from `top`, each inner node swept after its children; with `above_cut`, only
+  // the nodes above the regions' roots. `stack` is scratch.
+  uint64_t rotate_subtree(uint32_t top, bool above_cut, double& area, std::vector<uint64_t>& stack) {
+    constexpr uint64_t kChildrenDone = uint64_t{1} << 32;  // beside the node's id
+    uint64_t moves = 0;
+    stack.assign(1, top);
+    while (!stack.empty()) {
+      const uint64_t e = stack.back();
+      stack.pop_back();
+      const uint32_t v = static_cast<uint32_t>(e);
+      if (e & kChildrenDone) {
+        moves += rotate_at(v, area);
+        continue;
+      }
+      const BvhNode& nd = bvh_[v];
+      if (nd.is_leaf() || (above_cut && cut_.contains(v))) continue;
+      stack.push_back(v | kChildrenDone);
+      stack.push_back(nd.right());
+      stack.push_back(nd.left());
+    }
+    return moves;
+  }
+
+  // The best swap at s, in the Rotation order (the first of equal gains), if it lowers the
+  // children's area sum; its change is added to `area`.
+  uint64_t rotate_at(uint32_t s, double& area) {
+    const uint32_t l = bvh_[s].left(), r = bvh_[s].right();
+    const BvhNode& L = bvh_[l];
+    const BvhNode& R = bvh_[r];
+    const bool left_inner = !L.is_leaf(), right_inner = !R.is_leaf();
+    if (!left_inner && !right_inner) return 0;
+    const double al = L.area(), ar = R.area();
+    double best = 0.0;
+    int best_move = -1;
+    auto consider = [&](Rotation m, double delta) {
+      if (delta < best) {
+        best = delta;
+        best_move = static_cast<int>(m);
+      }
+    };
+    if (right_inner) {
+      const Box& rl = bvh_[R.left()].box;
+      const Box& rr = bvh_[R.right()].box;
+      consider(Rotation::left_with_right_left, double(merge(L.box, rr).area()) - ar);
+      consider(Rotation::left_with_right_right, double(merge(rl, L.box).area()) - ar);
+    }
+    if (left_inner) {
+      const Box& ll = bvh_[L.left()].box;
+      const Box& lr = bvh_[L.right()].box;
+      consider(Rotation::right_with_left_left, double(merge(R.box, lr).area()) - al);
+      consider(Rotation::right_with_left_right, double(merge(ll, R.box).area()) - al);
+      if (right_inner) {
+        const Box& rl = bvh_[R.left()].box;
+        const Box& rr = bvh_[R.right()].box;
+        consider(Rotation::left_left_with_right_left,
+                 (double(merge(rl, lr).area()) + double(merge(ll, rr).area())) - (al + ar));
+        consider(Rotation::left_left_with_right_right,
+                 (double(merge(rr, lr).area()) + double(merge(rl, ll).area())) - (al + ar));
+      }
+    }
+    if (best_move < 0) return 0;
+    apply_rotation(bvh_, s, static_cast<Rotation>(best_move));
+    // The changed children's areas as refitted: what a recount of the tree sums.
+    area += (bvh_[l].area() - al) + (bvh_[r].area() - ar);
+    return 1;
   }
 
   // The regions: the inner nodes at depth region_depth(), in depth-first order.
@@ -680,7 +793,7 @@ class InsertionOptimizer {
 };
 
 // The stages of each form.
-std::vector<Stage> stages_of(InsertionForm form, size_t node_count) {
+std::vector<Stage> stages_of(InsertionForm form, size_t node_count, bool rotations, bool parallel_start) {
   // The sequential stage hands over after two passes without progress, not five: by then its
   // passes by the measure only oscillate (hall 4M: five passes of 0.1 s each above the best
   // cost), while the regional passes after it gain about as much per pass in 0.06 s. Against
@@ -689,17 +802,46 @@ std::vector<Stage> stages_of(InsertionForm form, size_t node_count) {
   // converged sooner (1M 7.1-7.2 s against 8.2-9.2, 4M 31.2-31.8 against 33.9-36.8), at
   // 252.26 against 252.12 and the same 354.59. One pass cut the stage at its first
   // oscillation (1M converged at 257.24); three landed between.
-  const std::vector<Stage> regional = {{PassKind::parallel, true},
-                                       {PassKind::sequential, true, 2},
-                                       {PassKind::regional},
-                                       {PassKind::parallel}};
+  //
+  // Rotation sweeps follow the insertion stages of the default forms, each until a sweep gains
+  // less than a hand-over's 0.03 %. After the sequential stage and after the regional one they
+  // make at once what many random passes would; at the end they only lower the final tree. One
+  // before the sequential stage instead led it to a worse tree (hall 1M: converged 254.36
+  // against 252.26), so there is none there. With sweeps after it, the regional stage of a
+  // large tree hands over once five passes in a row each gain less than 0.005 %, not after
+  // the paper's ten without any gain: its slow tail is what the sweep then makes at once
+  // (hall 4M: converged at 353.98 in 29.0 s, against 353.69 in 38.7 s; within 5x the build
+  // time 355.20 against 357.12). A smaller tree, optimized in seconds, keeps the paper's rule:
+  // with it --form regional ended lower on 7 of the 11 shared scenes (Conference 96.73
+  // against 97.15).
+  const Stage sweep{PassKind::rotation, true, 1};
+  Stage regional_passes{PassKind::regional};
+  if (rotations && node_count >= kRegionalFrom) {
+    regional_passes.hand_over_gain = 5e-5;
+    regional_passes.patience = 5;
+  }
+  std::vector<Stage> stages;
+  auto then = [&](Stage st) {
+    if (st.kind != PassKind::rotation || rotations) stages.push_back(st);
+  };
   switch (resolved_form(form, node_count)) {
     case InsertionForm::sequential: return {{PassKind::sequential}};
     case InsertionForm::parallel: return {{PassKind::parallel}};
-    case InsertionForm::regional: return regional;
+    case InsertionForm::regional:
+      if (parallel_start) then({PassKind::parallel, true});
+      then({PassKind::sequential, true, 2});
+      then(sweep);
+      then(regional_passes);
+      then(sweep);
+      then({PassKind::parallel});
+      then(sweep);
+      return stages;
     case InsertionForm::hybrid: break;
   }
-  return {{PassKind::sequential}, {PassKind::parallel}};
+  then({PassKind::sequential});
+  then({PassKind::parallel});
+  then(sweep);
+  return stages;
 }
 
 OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const testing::AfterMove* after_move) {
@@ -715,7 +857,7 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
   // Depth-first numbers put every child after its parent: refit from the last node back.
   for (size_t i = bvh.nodes.size(); i-- > 0;)
     if (!bvh.nodes[i].is_leaf()) bvh.refit_node(static_cast<uint32_t>(i));
-  const std::vector<Stage> stages = stages_of(config.form, bvh.nodes.size());
+  const std::vector<Stage> stages = stages_of(config.form, bvh.nodes.size(), config.rotations, config.parallel_start);
   // Each stage starts afresh from the tree the last one left (its tracked sums included).
   // The first one also tells the initial cost: its sums are a scan of the whole array (4M
   // triangles: 67 ms), not worth making twice.
