@@ -427,7 +427,10 @@ class InsertionOptimizer {
   }
 
   // The best swap at s, in the Rotation order (the first of equal gains), if it lowers the
-  // children's area sum; its change is added to `area`.
+  // children's area sum; its change is added to `area`. The deltas are rotation_cost_delta's
+  // (c_T = 1), summed in its order, from the four boxes read once: through that function,
+  // which plans each move from the nodes again, a stage of sweeps took 136 ms instead of 105
+  // (hall 1M, the same moves).
   uint64_t rotate_at(uint32_t s, double& area) {
     const uint32_t l = bvh_[s].left(), r = bvh_[s].right();
     const BvhNode& L = bvh_[l];
