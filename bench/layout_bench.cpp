@@ -10,8 +10,11 @@
 // `--width`-wide nodes. Each figure is the median of its R samples, wall time (the layout
 // runs on several threads); the process CPU time ratio is printed beside it, since on a
 // shared machine wall times also count other processes. Then the wide layout's bytes and
-// triangle slots (4 per leaf block) per triangle. The rounds reuse memory freed by the
-// rounds before, so this times the warm case; trace_bench prints each tree's layout done
+// triangle slots (4 per leaf block) per triangle. The rounds run on warm caches, and reuse
+// memory freed by the rounds before where the allocator hands it back: not always the wide
+// arena, which on the AMD VM came fresh in every round for 2CylinderEngine and Conference
+// (4 and 10 huge-page faults a round in /proc/vmstat, each page cleared by the kernel) and
+// from the round before for the other scenes. trace_bench prints each tree's layout done
 // once, cold.
 #include <tbb/global_control.h>
 
