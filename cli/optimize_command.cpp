@@ -238,8 +238,10 @@ void print_report_json(const OptimizeOptions& opt, const Loaded& in, const BvhFi
     const InsertionForm form =
         resolved_form(parse_form(opt.form).value_or(InsertionConfig{}.form), in.bvh.nodes.size());
     j["insertion_form"] = std::string(form_name(form));
-    // Whether the run swept rotations between its insertion stages (the regional form does,
-    // and hybrid's small-tree stages, unless --no-rotations).
+    // Whether the form runs rotation sweeps after its insertion stages (the regional form
+    // and hybrid's small-tree stages do, unless --no-rotations; a run that a limit stops
+    // early may not reach them), and whether it starts with the regional form's parallel
+    // stage.
     j["insertion_rotations"] = !opt.no_rotations && form != InsertionForm::sequential && form != InsertionForm::parallel;
     j["insertion_parallel_start"] = !opt.no_parallel_start && form == InsertionForm::regional;
   }
