@@ -100,13 +100,13 @@ enum class PassKind { sequential, regional, parallel, rotation };
 struct Stage {
   PassKind kind;
   bool until_measure_stalls = false;
-  // A cap on the config's random_after, the passes without progress that end such a stage.
+  // A cap on the passes without progress that end the stage: on the config's random_after
+  // for a stage that ends where the measure stalls, else on its stop_after.
   uint32_t max_stalls = std::numeric_limits<uint32_t>::max();
-  // For a stage that does not end where the measure stalls: when > 0, it ends after
-  // `patience` passes in a row that each lower its best cost by less than this fraction
-  // (rather than the config's stop_after passes under its min_improvement).
-  double hand_over_gain = 0.0;
-  uint32_t patience = 0;
+  // The least gain of a pass, as a fraction of the cost, that counts as progress, when more
+  // than the config's min_improvement (a stage ending where the measure stalls asks for the
+  // hand-over's 0.03 % whatever this says).
+  double min_gain = 0.0;
 };
 
 // One stage of the optimizer (one form) over the tree, and its passes for the pass driver.
@@ -173,16 +173,13 @@ class InsertionOptimizer {
     // 1.5 build times on), and the converged cost is within the spread of the seed.
     constexpr double kHandOverImprovement = 3e-4;
     const double min_improvement =
-        stage_.until_measure_stalls  ? std::max(config_.min_improvement, kHandOverImprovement)
-        : stage_.hand_over_gain > 0 ? std::max(config_.min_improvement, stage_.hand_over_gain)
-                                    : config_.min_improvement;
+        std::max(config_.min_improvement, stage_.until_measure_stalls ? kHandOverImprovement : stage_.min_gain);
     if (c < stage_best * (1.0 - min_improvement))
       without_improvement_ = 0;
     else
       ++without_improvement_;
-    const uint32_t patience = stage_.until_measure_stalls  ? std::min(stage_.max_stalls, config_.random_after)
-                              : stage_.hand_over_gain > 0 ? std::min(stage_.patience, config_.stop_after)
-                                                          : config_.stop_after;
+    const uint32_t patience =
+        std::min(stage_.max_stalls, stage_.until_measure_stalls ? config_.random_after : config_.stop_after);
     return {c, moves, 0.0, without_improvement_ >= patience};
   }
 
@@ -820,8 +817,8 @@ std::vector<Stage> stages_of(InsertionForm form, size_t node_count, bool rotatio
   const Stage sweep{PassKind::rotation, true, 1};
   Stage regional_passes{PassKind::regional};
   if (rotations && node_count >= kRegionalFrom) {
-    regional_passes.hand_over_gain = 5e-5;
-    regional_passes.patience = 5;
+    regional_passes.min_gain = 5e-5;
+    regional_passes.max_stalls = 5;
   }
   std::vector<Stage> stages;
   auto then = [&](Stage st) {
