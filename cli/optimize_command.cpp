@@ -278,7 +278,7 @@ void run_optimize(const OptimizeOptions& opt) {
   ProgressLine progress;
   OptimizerConfig shared = opt.shared;
   shared.cost = in.info.cost;
-  if (!opt.time_budget.empty()) shared.limits.time_limit = parse_time_budget(opt.time_budget, in.build_seconds);
+  if (!opt.time_budget.empty()) shared.limits.time_budget = parse_time_budget(opt.time_budget, in.build_seconds);
   GainEstimate gain(sah_cost(in.bvh, in.info.cost));
   const bool annealing = *method == OptimizerMethod::anneal;
   shared.limits.on_pass = [&progress, &gain, annealing](const PassRecord& p) {
@@ -332,8 +332,9 @@ void register_optimize_command(CLI::App& app) {
       ->check(non_negative_number())
       ->type_name("S");
   cmd->add_option("--time-budget", opt->time_budget,
-                  "Like --time-limit (the best tree seen is kept), in seconds or, for a scene, as a multiple of "
-                  "its build time: 5x")
+                  "The seconds the optimizer may take, its work after the last pass included: a pass that would "
+                  "end too late, judged by the one before, is not started (the best tree seen is kept); in seconds "
+                  "or, for a scene, as a multiple of its build time: 5x")
       ->type_name("S|Nx")
       ->excludes("--time-limit");
   cmd->add_option("--seed", opt->shared.seed, "Seed of every random choice")->check(whole_number(0, UINT64_MAX))->capture_default_str();

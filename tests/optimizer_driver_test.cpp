@@ -177,6 +177,45 @@ TEST(OptimizerDriver, StopReasons) {
   }
 }
 
+// A time budget is kept before a pass, not only after one: with every pass made 0.1 s long
+// (the callback waits, after the pass's end is recorded), a budget of 0.25 s runs two passes,
+// since a third would end at about 0.3 s. A time limit of 0.25 s runs on until a pass has
+// ended past it: the fourth, recorded at about 0.3 s. Every optimizer, every form.
+TEST(OptimizerDriver, TimeBudgetStartsNoPassThatWouldEndPastIt) {
+  PrimitiveRefs refs = testing::random_refs(2000, 23);
+  const Bvh start = build_spatial_median(refs);
+  constexpr double kPass = 0.1, kBudget = 0.25;
+  const auto slow_passes = [](OptimizeLimits& limits) {
+    limits.on_pass = [wait = kPass](const PassRecord&) { std::this_thread::sleep_for(std::chrono::duration<double>(wait)); };
+  };
+  for (const auto& optimizer : every_optimizer()) {
+    const std::string& name = optimizer.first;
+    const Runner& run = optimizer.second;
+    Bvh unlimited = start;
+    if (run(unlimited, OptimizeLimits{}).passes <= 3) continue;  // converges before the limits matter
+    Bvh by_budget = start;
+    OptimizeLimits budget;
+    slow_passes(budget);
+    budget.time_budget = kBudget;
+    const OptimizeReport b = run(by_budget, budget);
+    // The first pass's own work, beside the wait: when a slow machine takes much of the
+    // margin (25 ms) the count cannot tell.
+    if (b.trace.empty() || b.trace[0].seconds > 0.02) GTEST_SKIP() << name << ": a pass's own work took too long";
+    EXPECT_EQ(b.stop_reason, StopReason::time_limit) << name;
+    EXPECT_EQ(b.passes, 2u) << name;
+    EXPECT_TRUE(validate(by_budget, refs).ok()) << name;
+    EXPECT_LE(b.final_cost, b.initial_cost) << name;
+
+    Bvh by_limit = start;
+    OptimizeLimits limit;
+    slow_passes(limit);
+    limit.time_limit = kBudget;
+    const OptimizeReport l = run(by_limit, limit);
+    EXPECT_EQ(l.stop_reason, StopReason::time_limit) << name;
+    EXPECT_EQ(l.passes, 4u) << name;
+  }
+}
+
 // A limit met while the hybrid's sequential stage ends by its own rule stops the run there,
 // before its parallel stage makes a pass: a pass limit met exactly then, a stop asked for
 // then, and a time limit that passes then. (The stage's last pass reports convergence, which

@@ -99,7 +99,7 @@ void apply_shared(OptimizerConfig& c, const CostModel& cost, uint64_t seed, std:
   c.seed = seed;
   if (time_budget) {
     if (!(*time_budget > 0.0)) throw Error("optimize: time_budget must be positive seconds (or None), got " + std::to_string(*time_budget));
-    c.limits.time_limit = *time_budget;
+    c.limits.time_budget = *time_budget;
   }
   if (passes) c.limits.max_passes = *passes;
 }
