@@ -869,13 +869,14 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     driver.stop(StopReason::nothing_to_optimize);
     return driver.finish();
   }
-  // The final renumbering's time, kept from a time budget: it moves every node to a
-  // scattered place, about 40-65 ns a node here (hall 1M, 4M and 10M triangles, 2 threads:
-  // 0.09, 0.31-0.46 and 1.29 s), more in the VM's slower phases (at 60 ns a bake at 10M
-  // ended 0.29 s past a budget of 11.1 s). Kept at the 10M rate, no more: what it keeps
-  // is taken from the passes (4M within 1x the build time: 0.52 s of 3.4).
-  constexpr double kRenumberSecondsPerNode = 65e-9;
-  driver.reserve_for_finish(kRenumberSecondsPerNode * static_cast<double>(bvh.nodes.size()));
+  // The final renumbering's time, kept from a time budget. It moves every node to a
+  // scattered place, and a node costs more the larger the tree (the caches and the TLB cover
+  // less of it): on the hall, 2 threads, 43 ns a node at 1M triangles (2M nodes, 0.09 s),
+  // 39-57 at 4M, 65 at 10M (1.3 s) and 110 at 50M (11.0 s). 65 ns times the cube root of
+  // the nodes over 20M, at least 45, follows all four; a flat 65 ns had a bake at 50M end
+  // 4 s past its 66 s budget.
+  const double node_count = static_cast<double>(bvh.nodes.size());
+  driver.reserve_for_finish(node_count * std::max(45e-9, 65e-9 * std::cbrt(node_count / 20e6)));
   {
     const double limit = config.limits.time_limit == 0.0   ? config.limits.time_budget
                          : config.limits.time_budget == 0.0 ? config.limits.time_limit
