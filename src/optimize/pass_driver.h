@@ -84,9 +84,9 @@ class PassDriver {
       // stage's first pass is not judged by the stage before's, which say little about it
       // (hall 10M, insertion: 0.30 s after passes of 0.50, 0.40 after 0.22), and a guess
       // from them can cost a whole stage: the 4M hall within 1x the build time, judged by
-      // twice the last pass, stopped before its first rotation sweep (0.1 s) in two runs of
-      // three, at 373.13 instead of about 367. So a budget can be overrun by a stage's
-      // first pass.
+      // the sequential stage's last pass (or twice it), stopped before its first
+      // rotation sweep (0.1 s) in two runs of three, at 373.13 instead of about 367. So a
+      // budget can be overrun by a stage's first pass.
       const double pass_start = elapsed();
       const double next_pass = first_of_stage ? 0.0 : last_pass_seconds_;
       if (limits_.time_budget > 0.0 && report_.passes > 0 &&
