@@ -7,17 +7,16 @@
 // --budget N stops each optimizer run at N build times (then "converged" is only where the
 // run stopped, marked so); without it every run goes to convergence.
 //
-// Per scene: the build's time; the best cost reached within 1x and 5x the build time (read
-// from the converged run's trace; and from runs of their own with that time budget, as
-// --time-budget 1x and 5x run: those leave out the huge-page collapse where it would not pay
-// back, so they can end lower, and they end their passes early enough to renumber the tree
-// within the budget, so they can end higher; their seconds are printed beside them) and its share of the converged gain (sweep cost ->
-// converged cost, ours; with --reference, also of a given converged cost, e.g. the issue's
-// 357.00 at 4M); the converged cost and time; the peak heap while building and while
-// optimizing, less the mesh, per triangle. The optimizer runs as bake runs it: the
-// references are dropped first (it needs only the tree), so its peak is tree + leaf slots +
-// scratch. Heap figures count every operator new of the process (this program replaces it);
-// the process's peak RSS is printed too.
+// Per scene: the build's time; the best cost reached within 1x and 5x the build time (read from the
+// converged run's trace; and from runs of their own with that time budget, as --time-budget 1x and
+// 5x run: those leave out the huge-page collapse where it would not pay back, so they can end
+// lower, and they end their passes early enough to renumber the tree within the budget, so they can
+// end higher; their seconds are printed beside them) and its share of the converged gain (sweep
+// cost -> converged cost, ours; with --reference, also of a given converged cost, e.g. the issue's
+// 357.00 at 4M); the converged cost and time; the peak heap while building and while optimizing,
+// less the mesh, per triangle. The optimizer runs as bake runs it: the references are dropped first
+// (it needs only the tree), so its peak is tree + leaf slots + scratch. Heap figures count every
+// operator new of the process (this program replaces it); the process's peak RSS is printed too.
 //
 // Times are wall seconds of one run on a shared machine: the targets are ratios to the build
 // time measured in the same run, and the growth from the smallest to the largest built-in

@@ -18,10 +18,10 @@ struct OptimizeLimits {
   // Seconds the whole run should take, its work after the last pass included: a pass is not
   // started when, judged by the length of the pass before it, it would end too late to leave
   // that work its time (the insertion optimizer's final renumbering, estimated from the
-  // tree's size). Stops with StopReason::time_limit. Unlike time_limit, which lets the pass
-  // under way finish and counts nothing after it (on the hall at 10M triangles a pass takes
-  // up to 0.45 s and the renumbering 1.3 s), so that `bake --time-budget 10` ends its
-  // optimizer within about 10 s. The first pass always runs, and the first pass of each of
+  // tree's size). Stops with StopReason::time_limit. So `bake --time-budget 10` ends its
+  // optimizer within about 10 s, where time_limit lets the pass under way finish and counts
+  // nothing after it (on the hall at 10M triangles a pass takes up to 0.45 s and the
+  // renumbering 1.3 s). The first pass always runs, and the first pass of each of
   // a method's stages is judged only by the time it leaves for that work (the stage
   // before's passes say little about its length), so one such pass can overrun the budget.
   double time_budget = 0.0;
