@@ -104,7 +104,7 @@ void add_method_options(CLI::App* cmd, OptimizeOptions& opt) {
   cmd->add_option("--form", opt.form,
                   "insertion: sequential (the paper's) | parallel (deterministic) | hybrid (the first, then the second, then "
                   "rotation sweeps; regional from 1M nodes) | regional (the paper's passes on all threads, in disjoint "
-                  "subtrees, with rotation sweeps)")
+                  "subtrees, batch after batch down the ranking, with rotation sweeps)")
       ->check(CLI::IsMember(names_of(insertion_forms(), form_name)))
       ->capture_default_str();
   cmd->add_flag("--no-rotations", opt.no_rotations,

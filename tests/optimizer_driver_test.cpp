@@ -19,6 +19,7 @@
 #include "bvhopt/optimizer_method.h"
 #include "bvhopt/random_stream.h"
 #include "bvhopt/sweep_sah_builder.h"
+#include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/tree_rotations.h"
 #include "bvhopt/validate.h"
 #include "test_support.h"
@@ -213,6 +214,50 @@ TEST(OptimizerDriver, TimeBudgetStartsNoPassThatWouldEndPastIt) {
     const OptimizeReport l = run(by_limit, limit);
     EXPECT_EQ(l.stop_reason, StopReason::time_limit) << name;
     EXPECT_EQ(l.passes, 4u) << name;
+  }
+}
+
+// With a time budget, an insertion stage the budget stops is followed by sweeps of
+// rotations (a closing stage) that end within the budget; without rotations there is none.
+// The first two passes are made 0.1 s long by the test hook: they fit a 0.25 s budget, a
+// third as long would not, so the hybrid's sequential stage stops there, and the sweeps fit
+// in what is left.
+TEST(OptimizerDriver, BudgetStoppedInsertionEndsWithRotationSweeps) {
+  PrimitiveRefs refs = testing::random_refs(2000, 25);
+  const Bvh start = build_spatial_median(refs);
+  constexpr double kBudget = 0.25;
+  for (bool rotations : {true, false}) {
+    InsertionConfig cfg = insertion_of(InsertionForm::hybrid);
+    cfg.rotations = rotations;
+    cfg.limits.time_budget = kBudget;
+    uint32_t passes = 0;
+    bool slept = false;
+    cfg.limits.on_pass = [&](const PassRecord&) {
+      ++passes;
+      slept = false;
+    };
+    Bvh bvh = start;
+    const OptimizeReport r = testing::optimize_insertion_observed(bvh, cfg, [&](const Bvh&, double) {
+      if (passes < 2 && !slept) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      slept = true;
+    });
+    ASSERT_GE(r.trace.size(), 2u);
+    // A slow machine's own work can take the margin: then the count cannot tell.
+    if (r.trace[0].seconds > 0.12) GTEST_SKIP() << "a pass's own work took too long";
+    EXPECT_EQ(r.stop_reason, StopReason::time_limit);
+    EXPECT_EQ(r.trace[0].stage, 0u);
+    EXPECT_EQ(r.trace[1].stage, 0u);
+    const auto closing = std::count_if(r.trace.begin(), r.trace.end(), [](const PassRecord& p) { return p.stage == 1; });
+    if (rotations) {
+      EXPECT_GE(closing, 1) << "no sweep after the stage the budget stopped";
+      EXPECT_LE(r.trace.back().seconds, kBudget);
+      // Sweeps never raise the cost.
+      EXPECT_LE(r.trace.back().cost, r.trace[1].best_cost);
+    } else {
+      EXPECT_EQ(closing, 0);
+    }
+    EXPECT_TRUE(validate(bvh, refs).ok());
+    EXPECT_NEAR(r.final_cost, sah_cost(bvh, cfg.cost), 1e-9 * r.final_cost);
   }
 }
 

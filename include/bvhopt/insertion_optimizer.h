@@ -54,15 +54,18 @@ enum class InsertionForm {
   // (half a million triangles), the regional form instead.
   hybrid,
   // For large trees, the paper's sequential passes on all threads. Four insertion stages:
-  // parallel passes by the measure until it stalls, sequential ones by the measure until it
-  // stalls again, then regional passes (random selection as in the paper; the tree is cut at
-  // a fixed depth into disjoint subtrees of about 32k nodes, and each candidate inside one is
-  // updated there, its children reinserted at the best place inside that subtree; the
-  // subtrees run at once, each on its own candidates in order), then the parallel form as a
-  // polish. Rotation sweeps (InsertionConfig::rotations) follow the sequential stage, the
-  // regional one and the polish. The tree does not depend on the thread count. Hall at 1M
-  // and 4M triangles, 2 threads: ahead of sequential-then-parallel from one build time on,
-  // and converges lower in less time (docs/optimization-at-scale.md).
+  // parallel passes by the measure until it stalls; sequential ones until it stalls again,
+  // each pass taking the next batch down the measure's ranking instead of its top every
+  // time (the top 1 % every other pass, and the next batches of the top 8 % in turn: those
+  // as regional passes); then regional passes, batch after batch down the top third of the
+  // ranking (the tree is cut at a fixed depth into disjoint subtrees of about 32k nodes, and
+  // each candidate inside one is updated there, its children reinserted at the best place
+  // inside that subtree; the subtrees run at once, each on its own candidates in order);
+  // then the parallel form as a polish. Rotation sweeps (InsertionConfig::rotations) follow
+  // the sequential stage, the regional one and the polish, and close a run its time budget
+  // stops. The tree does not depend on the thread count. Hall at 1M and 4M triangles, 2
+  // threads: ahead of sequential-then-parallel from one build time on, and converges lower
+  // in less time (docs/optimization-at-scale.md).
   regional,
 };
 
@@ -103,8 +106,10 @@ struct InsertionConfig : OptimizerConfig {
   // The hybrid and regional forms follow their insertion stages with sweeps of Kensler's
   // rotations (hill climbing: at every inner node the child/grandchild swap that most lowers
   // its children's areas), each stage of sweeps until one gains less than 0.03 %: after the
-  // sequential stage, after the regional one, and at the end. false: the insertion stages
-  // alone. (The sequential and parallel forms never sweep.)
+  // sequential stage, after the regional one, and at the end; with a time budget
+  // (limits.time_budget), also after the insertion stage the budget stops, whose end keeps
+  // time for two sweeps. false: the insertion stages alone. (The sequential and parallel
+  // forms never sweep.)
   bool rotations = true;
   // The regional form's first stage: parallel passes by the measure (true), or none, so that
   // the sequential passes by the measure start at once (false). Those gain far more in the

@@ -3,6 +3,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <bit>
@@ -21,6 +22,7 @@
 #include "optimize/largest_from_root.h"
 #include "optimize/largest_keys.h"
 #include "optimize/pass_driver.h"
+#include "optimize/rank_windows.h"
 #include "optimize/reinsertion_search.h"
 #include "optimize/node_set.h"
 #include "optimize/undo_log.h"
@@ -107,13 +109,19 @@ struct Stage {
   // than the config's min_improvement (a stage ending where the measure stalls asks for the
   // hand-over's 0.03 % whatever this says).
   double min_gain = 0.0;
+  // Selection by the measure in this many windows of its ranking (detail::RankWindows), not
+  // the k largest on every pass; 0: the paper's. Random passes select as ever.
+  uint32_t rank_windows = 0;
+  detail::RankWindows::Order window_order = detail::RankWindows::Order::ruler;
+  // A sequential stage's passes in windows below the top run as regional passes.
+  bool regional_below_top_window = false;
 };
 
 // One stage of the optimizer (one form) over the tree, and its passes for the pass driver.
 class InsertionOptimizer {
  public:
   InsertionOptimizer(Bvh& bvh, const InsertionConfig& config, Stage stage, const testing::AfterMove* after_move)
-      : bvh_(bvh), config_(config), stage_(stage), after_move_(after_move) {
+      : bvh_(bvh), config_(config), stage_(stage), after_move_(after_move), windows_(stage.window_order, stage.rank_windows) {
     for (const BvhNode& n : bvh_.nodes) {
       if (n.is_leaf())
         leaf_term_ += leaf_cost(n.area(), n.ref_count());
@@ -145,17 +153,19 @@ class InsertionOptimizer {
 
   detail::PassResult run_pass(uint32_t pass, double stage_best) {
     // Once the measure has stalled, selection stays random (section 2.5): going back to the
-    // measure after a good random pass would only retry the nodes that just stalled. The
-    // regional form selects at random from the start: it follows a stage that ended where
-    // the measure stalled.
-    random_ = random_ || without_improvement_ >= config_.random_after || stage_.kind == PassKind::regional;
+    // measure after a good random pass would only retry the nodes that just stalled. A
+    // regional stage without windows selects at random from the start: it follows a stage
+    // that ended where the measure's top stalled. With windows it reaches below that top.
+    random_ = random_ || without_improvement_ >= config_.random_after ||
+              (stage_.kind == PassKind::regional && stage_.rank_windows == 0);
     if (stage_.kind != PassKind::rotation) select(pass + 1, random_, candidates_);
     uint64_t moves = 0;
     if (stage_.kind == PassKind::rotation) {
       moves = pass_rotations();
     } else if (stage_.kind == PassKind::parallel) {
       moves = pass_parallel(candidates_);
-    } else if (stage_.kind == PassKind::regional) {
+    } else if (stage_.kind == PassKind::regional ||
+               (stage_.regional_below_top_window && selected_window_ > 0)) {
       moves = pass_regional();
     } else {
       Scope whole = whole_tree();
@@ -236,9 +246,10 @@ class InsertionOptimizer {
   }
 
   // Candidates of one pass: the k inner non-root nodes with the largest measure, largest
-  // first, or k random ones.
+  // first, or the stage's next window of that ranking, or k random ones.
   void select(uint32_t pass, bool random, std::vector<uint32_t>& out) {
     out.clear();
+    selected_window_ = 0;
     // Moves reuse the freed nodes as inner nodes, so the set of inner node ids never
     // changes; only which of them is the root does (the root is skipped when met).
     if (inner_count_ == 0)
@@ -256,6 +267,24 @@ class InsertionOptimizer {
       }
       return;
     }
+    if (stage_.rank_windows == 0) {
+      rank(k, out);
+    } else {
+      const auto is_inner = [&](size_t i) { return !bvh_.nodes[i].is_leaf(); };
+      const auto key_of = [&](size_t i) { return key(static_cast<uint32_t>(i)); };
+      windows_.next(
+          k, [&](size_t n, std::vector<uint32_t>& ids) { rank(std::min(n, inner_count_), ids); },
+          [&](uint32_t count, size_t kk, std::vector<uint32_t>& ids, std::vector<size_t>& starts) {
+            detail::partition_into_windows(bvh_.nodes.size(), kk, count, is_inner, key_of, ids, starts);
+          },
+          out);
+      selected_window_ = windows_.last_window();
+    }
+    std::erase(out, bvh_.root);
+  }
+
+  // The ids of the k inner nodes with the largest measure, largest first, in `ids`.
+  void rank(size_t k, std::vector<uint32_t>& ids) {
     const auto key_of = [&](size_t i) { return key(static_cast<uint32_t>(i)); };
     // Areas never grow from a node to its children: the largest are found from the root
     // down, without reading the whole array. The same keys either way.
@@ -264,10 +293,8 @@ class InsertionOptimizer {
                            from_root_.largest(bvh_, k, key_of, keys_);
     if (!from_root)
       largest_.largest(bvh_.nodes.size(), k, [&](size_t i) { return !bvh_.nodes[i].is_leaf(); }, key_of, keys_);
-    for (uint64_t kk : keys_) {
-      const uint32_t n = 0xffffffffu - static_cast<uint32_t>(kk);
-      if (n != bvh_.root) out.push_back(n);
-    }
+    ids.clear();
+    for (uint64_t kk : keys_) ids.push_back(0xffffffffu - static_cast<uint32_t>(kk));
   }
 
   // One 64-bit key per inner node: the measure's float bits (non-negative floats order as
@@ -760,6 +787,8 @@ class InsertionOptimizer {
   const Stage stage_;
   const testing::AfterMove* after_move_;  // may be null
   bool random_ = false;                   // selection has turned random for the rest of the stage
+  detail::RankWindows windows_;           // the stage's windows of the ranking, if any
+  uint32_t selected_window_ = 0;          // the window of this pass's candidates (0: the top)
   uint32_t without_improvement_ = 0;      // passes since the last one that counted as progress
   std::vector<uint32_t> candidates_;
   double inner_area_ = 0.0;
@@ -792,6 +821,9 @@ class InsertionOptimizer {
   double leaf_cost(double area, uint32_t count) const { return config_.cost.intersection * area * count; }
 };
 
+// A stage of sweeps of rotations, until one gains less than a hand-over's 0.03 %.
+Stage sweep_stage() { return {PassKind::rotation, true, 1}; }
+
 // The stages of each form.
 std::vector<Stage> stages_of(InsertionForm form, size_t node_count, bool rotations, bool parallel_start) {
   // The sequential stage hands over after two passes without progress, not five: by then its
@@ -814,8 +846,28 @@ std::vector<Stage> stages_of(InsertionForm form, size_t node_count, bool rotatio
   // time 355.20 against 357.12). A smaller tree, optimized in seconds, keeps the paper's rule:
   // with it --form regional ended lower on 7 of the 11 shared scenes (Conference 96.73
   // against 97.15).
-  const Stage sweep{PassKind::rotation, true, 1};
+  //
+  // The regional form's sequential and regional stages select in windows of the measure's
+  // ranking (detail::RankWindows), not the k largest or k random nodes. The sequential one
+  // takes the top 8 % by the ruler, its top window's passes over the whole tree and its lower
+  // ones' as regional passes (on all threads; below the top 1 %, a node's best place is
+  // mostly near it); the regional one cycles over the top 32 %. bench/scale_bench, hall,
+  // 2 threads, three runs (with the closing sweeps of run_insertion): within 1x the build
+  // time 1M 255.72-255.76 and 4M 361.23-361.31, against 260.16-260.37 and 366.64-367.11
+  // before (two runs); converged 251.79 in 3.7-4.2 s against 252.02 in 6.3-7.2 s, and
+  // 353.35 in 18.6-20.7 s against 353.98 in 29.0-29.9 s. Ruled out, one or two runs each
+  // within about 1x: windows in the parallel first stage (1M 260.78, 4M 366.7-368.6;
+  // converged 1M 257.21), a sequential stage over the whole tree in every window (1M
+  // 256.85-257.55, 4M 361.5-365.2) or in none (1M 260.6-262.0), windows in turn instead of
+  // the ruler there (1M 259.8-262.4).
+  const Stage sweep = sweep_stage();
+  Stage sequential_passes{PassKind::sequential, true, 2};
+  sequential_passes.rank_windows = 8;
+  sequential_passes.window_order = detail::RankWindows::Order::ruler;
+  sequential_passes.regional_below_top_window = true;
   Stage regional_passes{PassKind::regional};
+  regional_passes.rank_windows = 32;
+  regional_passes.window_order = detail::RankWindows::Order::cycle;
   if (rotations && node_count >= kRegionalFrom) {
     regional_passes.min_gain = 5e-5;
     regional_passes.max_stalls = 5;
@@ -829,7 +881,7 @@ std::vector<Stage> stages_of(InsertionForm form, size_t node_count, bool rotatio
     case InsertionForm::parallel: return {{PassKind::parallel}};
     case InsertionForm::regional:
       if (parallel_start) then({PassKind::parallel, true});
-      then({PassKind::sequential, true, 2});
+      then(sequential_passes);
       then(sweep);
       then(regional_passes);
       then(sweep);
@@ -876,7 +928,23 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
   // the nodes over 20M, at least 45, follows all four; a flat 65 ns had a bake at 50M end
   // 4 s past its 66 s budget.
   const double node_count = static_cast<double>(bvh.nodes.size());
-  driver.reserve_for_finish(node_count * std::max(45e-9, 65e-9 * std::cbrt(node_count / 20e6)));
+  const double renumbering = node_count * std::max(45e-9, 65e-9 * std::cbrt(node_count / 20e6));
+  // With a time budget, its end goes to sweeps of rotations: an insertion stage the budget
+  // stops is followed by a closing stage of sweeps, and keeps time for two of them. The
+  // first sweep after insertion passes makes at once much of what they leave undone (hall
+  // 4M: 3.7 units in 0.09 s, where a pass before it gained 0.4 in 0.2 s), and a budget that
+  // ended a stage before its sweeps lost that: the 4M hall within 3.6 s ended at 365.18 with
+  // its sequential stage still gaining. A sweep took 9.5 ns a node at 4M triangles on 2
+  // threads, 12-17 at 1M: 15 ns is kept on 2 threads, twice that on one.
+  // (Only in the forms that sweep: the paper's sequential and parallel forms never do.)
+  const bool closing_sweeps =
+      config.limits.time_budget > 0.0 &&
+      std::any_of(stages.begin(), stages.end(), [](const Stage& st) { return st.kind == PassKind::rotation; });
+  const double sweep_seconds = node_count * 30e-9 / std::clamp(tbb::this_task_arena::max_concurrency(), 1, 2);
+  // A stage of sweeps is never followed by the closing one: it keeps only the renumbering's.
+  const auto reserve_for = [&](const Stage& st) {
+    driver.reserve_for_finish(renumbering + (closing_sweeps && st.kind != PassKind::rotation ? 2.0 * sweep_seconds : 0.0));
+  };
   {
     const double limit = config.limits.time_limit == 0.0   ? config.limits.time_budget
                          : config.limits.time_budget == 0.0 ? config.limits.time_limit
@@ -888,10 +956,21 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     // ended at 0.30 s instead of 0.13 s).
     std::optional<detail::HugePageBacking> huge_pages;
     if (huge_pages_pay) huge_pages.emplace(bvh.nodes);
-    for (size_t k = 0; k < stages.size(); ++k) {
+    size_t k = 0;
+    for (; k < stages.size(); ++k) {
       if (k > 0) stage.emplace(bvh, config, stages[k], after_move);
+      reserve_for(stages[k]);
       driver.run(*stage);
       if (driver.stop_reason() != StopReason::converged) break;
+    }
+    if (closing_sweeps && k < stages.size() && stages[k].kind != PassKind::rotation &&
+        driver.stop_reason() == StopReason::time_limit) {
+      driver.expect_first_pass(sweep_seconds);
+      stage.emplace(bvh, config, sweep_stage(), after_move);
+      reserve_for(sweep_stage());
+      driver.run(*stage);
+      // A sweep that gains too little ends the stage; the run stopped for its budget.
+      if (driver.stop_reason() == StopReason::converged) driver.stop(StopReason::time_limit);
     }
   }
   stage.reset();  // its undo log and scratch, before renumbering allocates its own

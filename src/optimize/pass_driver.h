@@ -41,6 +41,9 @@ class PassDriver {
 
   // The seconds the method will spend after its last pass, kept from the time budget.
   void reserve_for_finish(double seconds) { finish_reserve_ = seconds; }
+  // How long the next stage's first pass is expected to take, where the method can tell
+  // (the time budget judges it by that, and by the last pass's callback).
+  void expect_first_pass(double seconds) { first_pass_estimate_ = seconds; }
 
   // Runs passes of `work` until its stopping rule or a limit, then leaves the lowest-cost
   // tree of this stage in it if the work asked for that. Work provides:
@@ -86,9 +89,11 @@ class PassDriver {
       // from them can cost a whole stage: the 4M hall within 1x the build time, judged by
       // the sequential stage's last pass (or twice it), stopped before its first
       // rotation sweep (0.1 s) in two runs of three, at 373.13 instead of about 367. So a
-      // budget can be overrun by a stage's first pass.
+      // budget can be overrun by a stage's first pass, unless the method said what to expect
+      // of it. The callback's time, which the pass would add again, counts either way.
       const double pass_start = elapsed();
-      const double next_pass = first_of_stage ? 0.0 : last_pass_seconds_;
+      const double next_pass = first_of_stage ? first_pass_estimate_ + last_callback_seconds_ : last_pass_seconds_;
+      if (first_of_stage) first_pass_estimate_ = 0.0;
       if (limits_.time_budget > 0.0 && report_.passes > 0 &&
           pass_start + next_pass + finish_reserve_ > limits_.time_budget) {
         report_.stop_reason = StopReason::time_limit;
@@ -137,7 +142,11 @@ class PassDriver {
     rec.stage = stage_;
     report_.trace.push_back(rec);
     report_.moves += r.moves;
-    if (limits_.on_pass) limits_.on_pass(rec);
+    if (limits_.on_pass) {
+      const double before = elapsed();
+      limits_.on_pass(rec);
+      last_callback_seconds_ = elapsed() - before;
+    }
     if (r.converged) {
       report_.stop_reason = StopReason::converged;
     } else if (limits_.max_passes != 0 && report_.passes >= limits_.max_passes) {
@@ -159,6 +168,8 @@ class PassDriver {
   double best_ = 0.0;  // lowest cost of the whole run, for the records
   double last_pass_seconds_ = 0.0;  // the last pass's, its record and callback included
   double finish_reserve_ = 0.0;
+  double first_pass_estimate_ = 0.0;  // the next stage's first pass, if the method told
+  double last_callback_seconds_ = 0.0;  // the last pass's on_pass
   uint32_t stage_ = 0;  // run() calls finished: the stage the next records belong to
 };
 
