@@ -84,11 +84,11 @@ class RankWindows {
 // bucket; the last window ends with the bucket that reaches count * k.
 //
 // Why not an exact ranking: the insertion optimizer's regional stage takes a third of the
-// inner nodes in windows; sorting them took 3 s per cycle at 10M triangles from the root
-// down, and gathering their keys in a scan held up to four times as many 8-byte keys (4M
-// triangles: the optimizer's peak heap 103.5 bytes a triangle instead of 88). Here two
-// scans and a histogram: the ids alone, 4 bytes each. The same windows on any thread count
-// (fixed chunks, placed by their counts in chunk order).
+// inner nodes in windows. Finding them from the root down took 3 s a cycle at 10M
+// triangles, and gathering their keys in a scan held up to four times as many 8-byte keys
+// (4M triangles: the optimizer's peak heap 103.5 bytes a triangle instead of 88). Here three
+// scans (the histogram, the counts, the placing) keep the ids alone, 4 bytes each. The same
+// windows on any thread count (fixed chunks, placed by their counts in chunk order).
 template <class IsMember, class KeyOf>
 void partition_into_windows(size_t n, size_t k, uint32_t count, const IsMember& is_member, const KeyOf& key_of,
                             std::vector<uint32_t>& ids, std::vector<size_t>& starts) {
@@ -121,8 +121,11 @@ void partition_into_windows(size_t n, size_t k, uint32_t count, const IsMember& 
   std::vector<size_t> place(chunks * count, 0);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, chunks), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t c = r.begin(); c < r.end(); ++c)
-      for (size_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i)
-        if (is_member(i) && window_of[bucket(key_of(i))] != kNone) ++place[c * count + window_of[bucket(key_of(i))]];
+      for (size_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+        if (!is_member(i)) continue;
+        const uint32_t w = window_of[bucket(key_of(i))];
+        if (w != kNone) ++place[c * count + w];
+      }
   });
   starts.assign(size_t{count} + 1, 0);
   size_t total = 0;
