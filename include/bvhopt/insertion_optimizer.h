@@ -55,9 +55,9 @@ enum class InsertionForm {
   hybrid,
   // For large trees, the paper's sequential passes on all threads. Four insertion stages:
   // parallel passes by the measure until it stalls; sequential ones until it stalls again,
-  // each pass taking the next batch down the measure's ranking instead of its top every
-  // time (the top 1 % every other pass, and the next batches of the top 8 % in turn: those
-  // as regional passes); then regional passes, batch after batch down the top third of the
+  // each pass taking a batch from the measure's ranking instead of its top every time (the
+  // top 1 % every other pass, the batches below it down to 8 % in between, those as
+  // regional passes); then regional passes, batch after batch down the top third of the
   // ranking (the tree is cut at a fixed depth into disjoint subtrees of about 32k nodes, and
   // each candidate inside one is updated there, its children reinserted at the best place
   // inside that subtree; the subtrees run at once, each on its own candidates in order);
