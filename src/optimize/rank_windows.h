@@ -19,6 +19,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "optimize/largest_keys.h"
+
 namespace bvhopt::detail {
 
 class RankWindows {
@@ -92,8 +94,9 @@ class RankWindows {
 template <class IsMember, class KeyOf>
 void partition_into_windows(size_t n, size_t k, uint32_t count, const IsMember& is_member, const KeyOf& key_of,
                             std::vector<uint32_t>& ids, std::vector<size_t>& starts) {
-  constexpr size_t kBuckets = size_t{1} << 16, kChunk = 16384;
-  const auto bucket = [](uint64_t key) { return static_cast<size_t>(key >> 48); };
+  // The buckets of LargestKeys, which selects from the same keys.
+  constexpr size_t kBuckets = LargestKeys::kBuckets, kChunk = 16384;
+  const auto bucket = [](uint64_t key) { return LargestKeys::bucket(key); };
   tbb::combinable<std::vector<uint32_t>> local([] { return std::vector<uint32_t>(kBuckets, 0); });
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kChunk), [&](const tbb::blocked_range<size_t>& r) {
     std::vector<uint32_t>& h = local.local();
