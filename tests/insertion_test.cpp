@@ -88,35 +88,53 @@ Bvh build_start(const PrimitiveRefs& refs, int kind) {
 
 double relative_gap(double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-300); }
 
+// The optimizer's area keys of a tree (the root's the smallest), and the k largest of them
+// by a full sort, without the root's: what LargestFromRoot must give.
+struct AreaKeys {
+  const Bvh& bvh;
+  double root_area = bvh[bvh.root].area();
+  uint64_t operator()(size_t i) const {
+    const float m = i == bvh.root ? 0.0f : static_cast<float>(bvh.nodes[i].area() / root_area);
+    return (uint64_t{std::bit_cast<uint32_t>(m)} << 32) | (0xffffffffu - static_cast<uint32_t>(i));
+  }
+  std::vector<uint64_t> largest_by_sort(size_t k) const {
+    std::vector<uint64_t> keys;
+    for (size_t i = 0; i < bvh.nodes.size(); ++i)
+      if (!bvh.nodes[i].is_leaf()) keys.push_back((*this)(i));
+    std::sort(keys.begin(), keys.end(), std::greater<uint64_t>());
+    keys.resize(std::min(k, keys.size()));
+    // The walk leaves out the root (which the optimizer skips), of all the keys the smallest
+    // or tied at 0 with zero-area nodes.
+    std::erase(keys, (*this)(bvh.root));
+    return keys;
+  }
+};
+
 // The walk from the root gives exactly the keys a full sort of the inner nodes' keys gives
 // (the optimizer's area keys: the root's the smallest), on built trees, on trees whose ids
 // the optimizer's moves have shuffled, with many nodes tied at the k-th key (copies of one
 // box), and it declines where the k-th key is 0 (zero-area boxes), which the root ties.
+// Each k is asked for twice: the second time from the threshold the first one left (one
+// walker for every tree, so other k's thresholds, from other trees, start many of the
+// first times: too high or too low, they must still give the same keys).
 TEST(LargestFromRoot, GivesTheKLargestAreaKeysAsAFullSortDoes) {
   detail::LargestFromRoot walk;
-  int walked = 0, declined = 0;
+  int walked = 0, declined = 0, from_threshold = 0;
   auto check = [&](const Bvh& bvh, size_t k, const std::string& what) {
-    const double root_area = bvh[bvh.root].area();
-    auto key_of = [&](size_t i) {
-      const float m = i == bvh.root ? 0.0f : static_cast<float>(bvh.nodes[i].area() / root_area);
-      return (uint64_t{std::bit_cast<uint32_t>(m)} << 32) | (0xffffffffu - static_cast<uint32_t>(i));
-    };
-    std::vector<uint64_t> expected;
-    for (size_t i = 0; i < bvh.nodes.size(); ++i)
-      if (!bvh.nodes[i].is_leaf()) expected.push_back(key_of(i));
-    std::sort(expected.begin(), expected.end(), std::greater<uint64_t>());
-    expected.resize(std::min(k, expected.size()));
-    // The walk leaves out the root (which the optimizer skips), of all the keys the smallest
-    // or tied at 0 with zero-area nodes.
-    std::erase(expected, key_of(bvh.root));
-    std::vector<uint64_t> got;
-    if (!walk.largest(bvh, k, key_of, got)) {
-      ++declined;
-      EXPECT_EQ(expected.size() == k ? expected.back() >> 32 : 0u, 0u) << what << ": declined, k " << k;
-      return;
+    const AreaKeys key_of{bvh};
+    const std::vector<uint64_t> expected = key_of.largest_by_sort(k);
+    for (int time = 0; time < 2; ++time) {
+      std::vector<uint64_t> got;
+      if (!walk.largest(bvh, k, key_of, got)) {
+        ++declined;
+        EXPECT_EQ(walk.last_path(), detail::LargestFromRoot::Path::declined);
+        EXPECT_EQ(expected.size() == k ? expected.back() >> 32 : 0u, 0u) << what << ": declined, k " << k;
+        return;
+      }
+      ++walked;
+      from_threshold += walk.last_path() == detail::LargestFromRoot::Path::from_threshold;
+      EXPECT_EQ(got, expected) << what << ", k " << k << ", time " << time;
     }
-    ++walked;
-    EXPECT_EQ(got, expected) << what << ", k " << k;
   };
   for (uint32_t trial = 0; trial < 40; ++trial) {
     const uint32_t count = 2 + trial * 97;
@@ -171,8 +189,36 @@ TEST(LargestFromRoot, GivesTheKLargestAreaKeysAsAFullSortDoes) {
   PrimitiveRefs points = testing::random_refs(300, 6);
   for (size_t i = 10; i < points.boxes.size(); ++i) points.boxes[i] = Box(points.boxes[0].min, points.boxes[0].min);
   check(build_object_median(points), 100, "points");
-  EXPECT_GT(walked, 1000);
+  EXPECT_GT(walked, 2000);
+  EXPECT_GT(from_threshold, 1000);
   EXPECT_GT(declined, 0);
+}
+
+// While the optimizer's moves change the tree, the walk keeps its threshold for k from one
+// selection to the next, as it does from pass to pass, and still gives exactly the keys of a
+// full sort.
+TEST(LargestFromRoot, KeepsItsThresholdWhileMovesChangeTheTree) {
+  const PrimitiveRefs refs = testing::random_refs(3000, 91);
+  Bvh bvh = build_sweep_sah(refs);
+  detail::LargestFromRoot walk;
+  InsertionConfig config;
+  config.form = InsertionForm::sequential;
+  config.limits.max_passes = 3;
+  config.batch = 0.1;
+  int moves = 0, selections = 0, from_threshold = 0;
+  testing::optimize_insertion_observed(bvh, config, [&](const Bvh& t, double) {
+    if (++moves % 5 != 0) return;
+    const AreaKeys key_of{t};
+    for (size_t k : {size_t{40}, size_t{90}}) {
+      std::vector<uint64_t> got;
+      ASSERT_TRUE(walk.largest(t, k, key_of, got)) << "move " << moves;
+      ++selections;
+      from_threshold += walk.last_path() == detail::LargestFromRoot::Path::from_threshold;
+      ASSERT_EQ(got, key_of.largest_by_sort(k)) << "move " << moves << ", k " << k;
+    }
+  });
+  EXPECT_GT(selections, 100);
+  EXPECT_GT(from_threshold, selections * 9 / 10);
 }
 
 // Algorithm 1 must find the same minimum as trying every node, including when a subtree
