@@ -119,14 +119,32 @@ inline ReinsertionCandidate search_reinsertion(const Bvh& bvh, const Box& box, u
   return best;
 }
 
+// P's ancestors bottom-up (P's parent first), each with its child off the path up from P:
+// the path the search after removing a child of P walks (search_reinsertion_after_removal).
+struct AncestorLink {
+  uint32_t node;
+  uint32_t off_path;
+};
+inline void ancestors_of(const Bvh& bvh, uint32_t p, std::vector<AncestorLink>& chain) {
+  const BvhNode* nodes = bvh.nodes.data();
+  chain.clear();
+  uint32_t from = p;
+  for (uint32_t a = nodes[p].parent; a != kInvalidNode; a = nodes[a].parent) {
+    chain.push_back({a, nodes[a].left() == from ? nodes[a].right() : nodes[a].left()});
+    from = a;
+  }
+}
+
 // The same search in the tree as it would be after Figure 3's removal of `n` and its parent
 // P (P's other child S in P's place, the boxes above shrunk), without changing the tree:
 // the path from the root down to P's parent is walked first with the shrunk boxes, and the
-// subtrees hanging off it (none of which contains n) are searched as usual. `gain` receives
-// the area the removal frees. Exact: it equals find_reinsertion on the removed tree.
+// subtrees hanging off it (none of which contains n) are searched as usual. `chain` is P's
+// ancestors (ancestors_of), found apart so that a caller can walk several paths at once;
+// `heap` and `shrunk` are scratch. `gain` receives the area the removal frees. Exact: it
+// equals find_reinsertion on the removed tree.
 inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, const Box& box, uint32_t n,
-                                                             std::vector<SearchEntry>& heap,
-                                                             std::vector<std::pair<uint32_t, Box>>& path,
+                                                             const std::vector<AncestorLink>& chain,
+                                                             std::vector<SearchEntry>& heap, std::vector<Box>& shrunk,
                                                              double* gain) {
   ReinsertionCandidate best{kInvalidNode, std::numeric_limits<double>::infinity()};
   const BvhNode* nodes = bvh.nodes.data();
@@ -135,17 +153,14 @@ inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, con
   const double l_area = box.area();
   auto later = [](const SearchEntry& a, const SearchEntry& b) { return a.induced > b.induced; };
   heap.clear();
-  path.clear();
+  shrunk.resize(chain.size());
   // Shrunk boxes bottom-up: each ancestor of P without n's subtree.
   double freed = static_cast<double>(nodes[n].area()) + nodes[p].area();
   Box below = nodes[s].box;
-  uint32_t from = p;
-  for (uint32_t a = nodes[p].parent; a != kInvalidNode; a = nodes[a].parent) {
-    const uint32_t other = nodes[a].left() == from ? nodes[a].right() : nodes[a].left();
-    below = merge(below, nodes[other].box);
-    path.push_back({a, below});
-    freed += static_cast<double>(nodes[a].area()) - below.area();
-    from = a;
+  for (size_t i = 0; i < chain.size(); ++i) {
+    below = merge(below, nodes[chain[i].off_path].box);
+    shrunk[i] = below;
+    freed += static_cast<double>(nodes[chain[i].node].area()) - below.area();
   }
   if (gain) *gain = freed;
 
@@ -164,27 +179,21 @@ inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, con
   };
   // The search starts where the subtree was: S in P's place is evaluated first (and its
   // subtree queued), so its cost bounds everything after; then the path top-down, each
-  // off-path subtree opened only if its bound beats the best so far. `path` is bottom-up.
+  // off-path subtree opened only if its bound beats the best so far. `chain` is bottom-up.
   // Ties keep the first found, so the minimum is the exhaustive search's.
   double induced = 0.0;
-  for (size_t i = path.size(); i-- > 0;) {
-    const Box& shrunk = path[i].second;
-    induced = induced + (merge(shrunk, box).area() - static_cast<double>(shrunk.area()));
-  }
+  for (size_t i = chain.size(); i-- > 0;)
+    induced = induced + (merge(shrunk[i], box).area() - static_cast<double>(shrunk[i].area()));
   consider(s, induced);
   induced = 0.0;
-  for (size_t i = path.size(); i-- > 0;) {
-    const uint32_t a = path[i].first;
-    const Box& shrunk = path[i].second;
-    const double shrunk_area = shrunk.area();
-    const double direct = merge(shrunk, box).area();
+  for (size_t i = chain.size(); i-- > 0;) {
+    const double shrunk_area = shrunk[i].area();
+    const double direct = merge(shrunk[i], box).area();
     const double total = induced + direct;
-    if (total < best.cost) best = {a, total};
+    if (total < best.cost) best = {chain[i].node, total};
     const double child_induced = induced + (direct - shrunk_area);
-    const uint32_t on_path = i > 0 ? path[i - 1].first : p;
-    const uint32_t off_path = nodes[a].left() == on_path ? nodes[a].right() : nodes[a].left();
     // The path is short; an off-path subtree whose bound already loses is never opened.
-    if (child_induced + l_area < best.cost) consider(off_path, child_induced);
+    if (child_induced + l_area < best.cost) consider(chain[i].off_path, child_induced);
     induced = child_induced;
   }
 
