@@ -77,7 +77,7 @@ ReinsertionCandidate find_reinsertion(const Bvh& bvh, const Box& box, uint32_t s
 ReinsertionCandidate find_reinsertion_after_removal(const Bvh& bvh, const Box& box, uint32_t n, double* freed_area) {
   std::vector<detail::SearchEntry> heap;
   std::vector<detail::AncestorLink> chain;
-  std::vector<Box> shrunk;
+  std::vector<detail::ShrunkArea> shrunk;
   detail::ancestors_of(bvh, bvh[n].parent, chain);
   return detail::search_reinsertion_after_removal(bvh, box, n, chain, heap, shrunk, freed_area);
 }
@@ -699,7 +699,7 @@ class InsertionOptimizer {
   static constexpr size_t kPlanWalks = 8;
   struct PlanScratch {
     std::vector<detail::SearchEntry> heap;
-    std::vector<Box> shrunk;
+    std::vector<detail::ShrunkArea> shrunk;
     std::vector<detail::AncestorLink> chains[kPlanWalks];
   };
   void plan_group(const std::vector<uint32_t>& candidates, size_t begin, size_t end, PlanScratch& sc) {

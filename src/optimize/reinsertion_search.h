@@ -142,10 +142,16 @@ inline void ancestors_of(const Bvh& bvh, uint32_t p, std::vector<AncestorLink>& 
 // ancestors (ancestors_of), found apart so that a caller can walk several paths at once;
 // `heap` and `shrunk` are scratch. `gain` receives the area the removal frees. Exact: it
 // equals find_reinsertion on the removed tree.
+// An ancestor's shrunk box, as the search after removal needs it: its area, and its area
+// once merged with the box being placed.
+struct ShrunkArea {
+  double area;
+  double merged;
+};
 inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, const Box& box, uint32_t n,
                                                              const std::vector<AncestorLink>& chain,
-                                                             std::vector<SearchEntry>& heap, std::vector<Box>& shrunk,
-                                                             double* gain) {
+                                                             std::vector<SearchEntry>& heap,
+                                                             std::vector<ShrunkArea>& shrunk, double* gain) {
   ReinsertionCandidate best{kInvalidNode, std::numeric_limits<double>::infinity()};
   const BvhNode* nodes = bvh.nodes.data();
   const uint32_t p = nodes[n].parent;
@@ -159,8 +165,8 @@ inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, con
   Box below = nodes[s].box;
   for (size_t i = 0; i < chain.size(); ++i) {
     below = merge(below, nodes[chain[i].off_path].box);
-    shrunk[i] = below;
-    freed += static_cast<double>(nodes[chain[i].node].area()) - below.area();
+    shrunk[i] = {below.area(), merge(below, box).area()};
+    freed += static_cast<double>(nodes[chain[i].node].area()) - shrunk[i].area;
   }
   if (gain) *gain = freed;
 
@@ -182,13 +188,12 @@ inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, con
   // off-path subtree opened only if its bound beats the best so far. `chain` is bottom-up.
   // Ties keep the first found, so the minimum is the exhaustive search's.
   double induced = 0.0;
-  for (size_t i = chain.size(); i-- > 0;)
-    induced = induced + (merge(shrunk[i], box).area() - static_cast<double>(shrunk[i].area()));
+  for (size_t i = chain.size(); i-- > 0;) induced = induced + (shrunk[i].merged - shrunk[i].area);
   consider(s, induced);
   induced = 0.0;
   for (size_t i = chain.size(); i-- > 0;) {
-    const double shrunk_area = shrunk[i].area();
-    const double direct = merge(shrunk[i], box).area();
+    const double shrunk_area = shrunk[i].area;
+    const double direct = shrunk[i].merged;
     const double total = induced + direct;
     if (total < best.cost) best = {chain[i].node, total};
     const double child_induced = induced + (direct - shrunk_area);
