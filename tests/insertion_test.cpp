@@ -16,7 +16,6 @@
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/validate.h"
-#include "optimize/huge_page_backing.h"
 #include "optimize/largest_from_root.h"
 #include "optimize/largest_keys.h"
 #include "optimize/reinsertion_search.h"
@@ -647,25 +646,9 @@ TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreads) {
   }
 }
 
-// The collapse stalls the passes while it runs and pays back over a long run only: started
-// without a time limit and in runs that leave about 80 ms per MB of nodes, not in the 1x
-// and 5x budgets of bake --quality fast and balanced (4M triangles, 320 MB of nodes: 2.6 and
-// 13 s), where it left time for fewer passes.
-TEST(HugePageBacking, PaysOffOnlyInRunsLongEnough) {
-  using detail::HugePageBacking;
-  const size_t hall_4m = 320'000'000, hall_1m = 80'000'000;
-  EXPECT_TRUE(HugePageBacking::pays_off(hall_4m, 0.0, 0.3));    // no limit
-  EXPECT_FALSE(HugePageBacking::pays_off(hall_4m, 2.6, 0.3));   // 1x the build time
-  EXPECT_FALSE(HugePageBacking::pays_off(hall_4m, 13.0, 0.3));  // 5x
-  EXPECT_TRUE(HugePageBacking::pays_off(hall_4m, 30.0, 0.3));
-  EXPECT_FALSE(HugePageBacking::pays_off(hall_1m, 2.7, 0.06));
-  EXPECT_TRUE(HugePageBacking::pays_off(hall_1m, 8.0, 0.06));
-  EXPECT_FALSE(HugePageBacking::pays_off(hall_1m, 2.0, 2.5));  // already past the limit
-}
-
-// A node array of several megabytes, whose whole huge pages the optimizer has collapsed
-// on a thread of its own while the passes run (where the kernel offers it): the tree and
-// every pass's cost stay those of one thread, and the tree stays valid.
+// A node array of several megabytes, whose parallel passes plan many groups of candidates
+// on each thread: the tree and every pass's cost stay those of one thread, and the tree
+// stays valid.
 TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreadsOnALargeArray) {
   PrimitiveRefs refs = testing::random_refs(80000, 13);
   std::string sig[2];

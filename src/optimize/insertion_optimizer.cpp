@@ -18,7 +18,6 @@
 #include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/tree_rotations.h"
 #include "optimize/find_by_name.h"
-#include "optimize/huge_page_backing.h"
 #include "optimize/largest_from_root.h"
 #include "optimize/largest_keys.h"
 #include "optimize/pass_driver.h"
@@ -1009,16 +1008,11 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     driver.reserve_for_finish(renumbering + (closing_sweeps && st.kind != PassKind::rotation ? 2.0 * sweep_seconds : 0.0));
   };
   {
-    const double limit = config.limits.time_limit == 0.0   ? config.limits.time_budget
-                         : config.limits.time_budget == 0.0 ? config.limits.time_limit
-                                                            : std::min(config.limits.time_limit, config.limits.time_budget);
-    const bool huge_pages_pay =
-        detail::HugePageBacking::pays_off(bvh.nodes.size() * sizeof(BvhNode), limit, driver.elapsed());
-    // Only once the first stage has summed the areas: that scan walks the array in the order
-    // the collapse does and waited on each page it was copying (1M triangles: the first pass
-    // ended at 0.30 s instead of 0.13 s).
-    std::optional<detail::HugePageBacking> huge_pages;
-    if (huge_pages_pay) huge_pages.emplace(bvh.nodes);
+    // The node array stays on the pages it has. It used to be collapsed into 2 MiB pages on
+    // a thread of its own while the passes ran (MADV_COLLAPSE), for their TLB misses; once
+    // a parallel pass's walks went several at a time (plan_group), that no longer paid back
+    // the passes it stalled: converged without it, whole process, 0.93 at 4M triangles and
+    // 0.95 at 1M (medians of six and eight pairs), 40.6 s against 44.9 at 10M (one pair).
     size_t k = 0;
     for (; k < stages.size(); ++k) {
       if (k > 0) stage.emplace(bvh, config, stages[k], after_move);
