@@ -9,9 +9,9 @@
 //
 // Per scene: the build's time; the best cost reached within 1x and 5x the build time (read from the
 // converged run's trace; and from runs of their own with that time budget, as --time-budget 1x and
-// 5x run: those leave out the huge-page collapse where it would not pay back, so they can end
-// lower, and they end their passes early enough to renumber the tree within the budget, so they can
-// end higher; their seconds are printed beside them) and its share of the converged gain (sweep
+// 5x run: those end their passes early enough to renumber the tree within the budget, so they can
+// end higher, and close with rotation sweeps, so they can end lower; their seconds are printed
+// beside them) and its share of the converged gain (sweep
 // cost -> converged cost, ours; with --reference, also of a given converged cost, e.g. the issue's
 // 357.00 at 4M); the converged cost and time; the peak heap while building and while optimizing,
 // less the mesh, per triangle. The optimizer runs as bake runs it: the references are dropped first
