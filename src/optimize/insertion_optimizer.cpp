@@ -721,6 +721,7 @@ class InsertionOptimizer {
         walking = true;
       }
     }
+    // The links ancestors_of gives, found for all the group's candidates in turn.
     while (walking) {
       walking = false;
       for (size_t w = 0; w < count; ++w) {

@@ -135,6 +135,13 @@ inline void ancestors_of(const Bvh& bvh, uint32_t p, std::vector<AncestorLink>& 
   }
 }
 
+// An ancestor's shrunk box, as the search after removal needs it: its area, and its area
+// once merged with the box being placed.
+struct ShrunkArea {
+  double area;
+  double merged;
+};
+
 // The same search in the tree as it would be after Figure 3's removal of `n` and its parent
 // P (P's other child S in P's place, the boxes above shrunk), without changing the tree:
 // the path from the root down to P's parent is walked first with the shrunk boxes, and the
@@ -142,12 +149,6 @@ inline void ancestors_of(const Bvh& bvh, uint32_t p, std::vector<AncestorLink>& 
 // ancestors (ancestors_of), found apart so that a caller can walk several paths at once;
 // `heap` and `shrunk` are scratch. `gain` receives the area the removal frees. Exact: it
 // equals find_reinsertion on the removed tree.
-// An ancestor's shrunk box, as the search after removal needs it: its area, and its area
-// once merged with the box being placed.
-struct ShrunkArea {
-  double area;
-  double merged;
-};
 inline ReinsertionCandidate search_reinsertion_after_removal(const Bvh& bvh, const Box& box, uint32_t n,
                                                              const std::vector<AncestorLink>& chain,
                                                              std::vector<SearchEntry>& heap,
