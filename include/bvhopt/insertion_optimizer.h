@@ -43,8 +43,10 @@ enum class InsertionForm {
   // sees the tree as it would be after that removal, so the gain is exact), keeps the better
   // of the two if it gains, then applies the plans in candidate order, skipping a plan that
   // touches a node an earlier move of the pass changed and undoing one that raised the cost
-  // (its boxes had changed). Never raises the cost; the tree does not depend on the thread
-  // count.
+  // (its boxes had changed). Once its selection turns random, a pass takes first the nodes
+  // the last pass's moves changed, with their parents and grandparents, then random ones
+  // (a move is several times likelier there). Never raises the cost; the tree does not
+  // depend on the thread count.
   parallel,
   // The sequential form until it stops, then the parallel form from its best tree: the fast
   // large gains of the first, then the monotone polish of the second; then rotation sweeps

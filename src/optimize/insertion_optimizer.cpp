@@ -20,6 +20,7 @@
 #include "optimize/find_by_name.h"
 #include "optimize/largest_from_root.h"
 #include "optimize/largest_keys.h"
+#include "optimize/near_moves.h"
 #include "optimize/pass_driver.h"
 #include "optimize/rank_windows.h"
 #include "optimize/reinsertion_search.h"
@@ -123,11 +124,16 @@ class InsertionOptimizer {
  public:
   InsertionOptimizer(Bvh& bvh, const InsertionConfig& config, Stage stage, const testing::AfterMove* after_move)
       : bvh_(bvh), config_(config), stage_(stage), after_move_(after_move), windows_(stage.window_order, stage.rank_windows) {
-    for (const BvhNode& n : bvh_.nodes) {
-      if (n.is_leaf())
+    inner_.reset(bvh_.nodes.size());
+    for (uint32_t i = 0; i < bvh_.nodes.size(); ++i) {
+      const BvhNode& n = bvh_.nodes[i];
+      if (n.is_leaf()) {
         leaf_term_ += leaf_cost(n.area(), n.ref_count());
-      else
+      } else {
         inner_area_ += n.area();
+        inner_.insert(i);
+        ++inner_count_;
+      }
     }
     root_area_ = bvh_[bvh_.root].area();
   }
@@ -251,19 +257,20 @@ class InsertionOptimizer {
   void select(uint32_t pass, bool random, std::vector<uint32_t>& out) {
     out.clear();
     selected_window_ = 0;
-    // Moves reuse the freed nodes as inner nodes, so the set of inner node ids never
-    // changes; only which of them is the root does (the root is skipped when met).
-    if (inner_count_ == 0)
-      for (const BvhNode& nd : bvh_.nodes) inner_count_ += !nd.is_leaf();
     if (inner_count_ == 0) return;
     const size_t k = std::clamp<size_t>(static_cast<size_t>(std::ceil(config_.batch * inner_count_)), 1, inner_count_);
     if (random) {
-      // Uniform over the inner nodes without a list of them: draws that hit a leaf are redrawn.
+      // A parallel pass first takes the nodes around the last pass's moves, where a move is
+      // three to five times likelier than at a random node (near_moves.h). The moves were
+      // applied in candidate order, so these do not depend on the thread count.
+      if (stage_.kind == PassKind::parallel) detail::append_near_moves(bvh_, touched_.members(), inner_, k, near_, out);
+      // Then uniform over the inner nodes without a list of them: draws that hit a leaf are
+      // redrawn, judged by the set of inner nodes, not by the node (a cache miss at 4M).
       RandomStream rng{config_.seed * kGoldenGamma + pass};
       const uint32_t count = static_cast<uint32_t>(bvh_.nodes.size());
-      for (size_t i = 0; i < k; ++i) {
+      while (out.size() < k) {
         uint32_t n = rng.below(count);
-        while (bvh_[n].is_leaf()) n = rng.below(count);
+        while (!inner_.contains(n)) n = rng.below(count);
         out.push_back(n);
       }
       return;
@@ -858,6 +865,9 @@ class InsertionOptimizer {
   double leaf_term_ = 0.0;
   double root_area_ = 0.0;
   Scratch scratch_;  // the whole tree's searches
+  // Moves reuse the freed nodes as inner nodes, so the set of inner node ids never changes;
+  // only which of them is the root does (the root is skipped when met).
+  detail::NodeBits inner_;
   size_t inner_count_ = 0;
   std::vector<uint64_t> keys_;
   detail::LargestKeys largest_;
@@ -866,6 +876,7 @@ class InsertionOptimizer {
   std::vector<uint32_t> by_id_;         // the candidates' indices, by their ids' buckets
   std::vector<uint32_t> bucket_start_;  // order_by_id's counts
   detail::NodeSet touched_;  // nodes a move of this parallel pass changed
+  detail::NodeSet near_;     // append_near_moves's scratch
   detail::UndoLog undo_;
   // The regional passes': the cut (region roots, by id too, and as a set), each candidate's
   // region, and each region's candidates, undo lane, area change and moves.

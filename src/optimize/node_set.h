@@ -39,10 +39,24 @@ class NodeSet {
     members_.clear();
   }
   size_t size() const { return members_.size(); }
+  // The members in the order they went in.
+  const std::vector<uint32_t>& members() const { return members_; }
 
  private:
   std::vector<uint64_t> bits_;
   std::vector<uint32_t> members_;
+};
+
+// A set of node ids filled once and then only read: bits alone, with no list of members
+// (a list of every inner node of a 4M-triangle tree would take 16 MB).
+class NodeBits {
+ public:
+  void reset(size_t node_count) { bits_.assign((node_count + 63) / 64, 0); }
+  void insert(uint32_t n) { bits_[n >> 6] |= uint64_t{1} << (n & 63); }
+  bool contains(uint32_t n) const { return (bits_[n >> 6] >> (n & 63)) & 1u; }
+
+ private:
+  std::vector<uint64_t> bits_;
 };
 
 }  // namespace bvhopt::detail
