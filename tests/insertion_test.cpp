@@ -16,6 +16,7 @@
 #include "bvhopt/sweep_sah_builder.h"
 #include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/validate.h"
+#include "optimize/in_subtree.h"
 #include "optimize/largest_from_root.h"
 #include "optimize/largest_keys.h"
 #include "optimize/near_moves.h"
@@ -220,6 +221,72 @@ TEST(LargestFromRoot, KeepsItsThresholdWhileMovesChangeTheTree) {
   });
   EXPECT_GT(selections, 100);
   EXPECT_GT(from_threshold, selections * 9 / 10);
+}
+
+// in_subtree stops its walk up at the first box outside the subtree's: it must say what a
+// walk to the root says, for every pair of nodes, on built trees, on trees the optimizer has
+// reshaped, and where boxes tie (copies of one box, zero-area points), so that containment
+// says little.
+TEST(InSubtree, AgreesWithTheWalkToTheRootForEveryPair) {
+  int inside = 0;
+  for (uint32_t trial = 0; trial < 12; ++trial) {
+    PrimitiveRefs refs = testing::random_refs(40 + 13 * trial, 900 + trial);
+    if (trial % 3 == 1)
+      for (size_t i = 3; i < refs.boxes.size(); i += 3) refs.boxes[i] = refs.boxes[0];
+    if (trial % 3 == 2)
+      for (size_t i = 0; i < refs.boxes.size(); i += 2) refs.boxes[i] = Box(refs.boxes[1].min, refs.boxes[1].min);
+    Bvh bvh = build_sweep_sah(refs);
+    if (trial % 2 == 1) {
+      InsertionConfig config;
+      config.form = InsertionForm::parallel;
+      config.limits.max_passes = 4;
+      config.batch = 0.2;
+      optimize_insertion(bvh, config);
+    }
+    ASSERT_TRUE(validate(bvh, refs).ok()) << "trial " << trial;
+    for (uint32_t r = 0; r < bvh.nodes.size(); ++r)
+      for (uint32_t x = 0; x < bvh.nodes.size(); ++x) {
+        bool expected = false;
+        for (uint32_t a = x; a != kInvalidNode; a = bvh[a].parent) expected = expected || a == r;
+        inside += expected;
+        ASSERT_EQ(detail::in_subtree(bvh, x, r), expected) << "trial " << trial << ", x " << x << ", subtree " << r;
+      }
+  }
+  EXPECT_GT(inside, 1000);
+}
+
+// A threshold kept from another tree can gather far too many nodes (here every node of a
+// tree of nearly equal boxes lies above the one a tree of random boxes left): the walks stop
+// past their limit, on all threads, and the best-first walk still gives the keys of a full
+// sort. One a little too high is walked again lower: the same keys.
+TEST(LargestFromRoot, GivesTheSameKeysWhenAThresholdGathersFarTooManyOrTooFew) {
+  detail::LargestFromRoot walk;
+  const Bvh spread = build_sweep_sah(testing::random_refs(20000, 31));
+  PrimitiveRefs near_refs = testing::random_refs(20000, 32);
+  // Boxes of nearly the whole scene, each a little different: about 20k inner nodes whose
+  // areas are all close to the root's, none tied.
+  Box all = near_refs.boxes[0];
+  for (const Box& b : near_refs.boxes) all = merge(all, b);
+  for (size_t i = 0; i < near_refs.boxes.size(); ++i) {
+    const float f = 0.9f + 0.1f * static_cast<float>(i) / static_cast<float>(near_refs.boxes.size());
+    near_refs.boxes[i] = Box(all.min, all.min + (all.max - all.min) * f);
+    near_refs.centroids[i] = near_refs.boxes[i].center();
+  }
+  const Bvh near_whole = build_sweep_sah(near_refs);
+  for (size_t k : {size_t{8}, size_t{300}}) {
+    for (const Bvh* bvh : {&spread, &near_whole, &spread, &near_whole}) {
+      const AreaKeys key_of{*bvh};
+      std::vector<uint64_t> got;
+      ASSERT_TRUE(walk.largest(*bvh, k, key_of, got)) << "k " << k;
+      EXPECT_EQ(got, key_of.largest_by_sort(k)) << "k " << k;
+    }
+    // A k asked for the first time starts from the threshold the tree of nearly equal boxes
+    // left for k, far too high on the spread tree: lowered and walked again, then best first.
+    const AreaKeys key_of{spread};
+    std::vector<uint64_t> got;
+    ASSERT_TRUE(walk.largest(spread, k + 1, key_of, got));
+    EXPECT_EQ(got, key_of.largest_by_sort(k + 1)) << "k " << k + 1;
+  }
 }
 
 // Algorithm 1 must find the same minimum as trying every node, including when a subtree

@@ -18,6 +18,7 @@
 #include "bvhopt/testing/insertion_hooks.h"
 #include "bvhopt/tree_rotations.h"
 #include "optimize/find_by_name.h"
+#include "optimize/in_subtree.h"
 #include "optimize/largest_from_root.h"
 #include "optimize/largest_keys.h"
 #include "optimize/near_moves.h"
@@ -122,8 +123,16 @@ struct Stage {
 // One stage of the optimizer (one form) over the tree, and its passes for the pass driver.
 class InsertionOptimizer {
  public:
-  InsertionOptimizer(Bvh& bvh, const InsertionConfig& config, Stage stage, const testing::AfterMove* after_move)
-      : bvh_(bvh), config_(config), stage_(stage), after_move_(after_move), windows_(stage.window_order, stage.rank_windows) {
+  // `from_root` is shared by the stages of a run: the thresholds it keeps hold from one stage
+  // to the next, so only the run's first selection of each size walks best first.
+  InsertionOptimizer(Bvh& bvh, const InsertionConfig& config, Stage stage, const testing::AfterMove* after_move,
+                     detail::LargestFromRoot& from_root)
+      : bvh_(bvh),
+        config_(config),
+        stage_(stage),
+        after_move_(after_move),
+        windows_(stage.window_order, stage.rank_windows),
+        from_root_(from_root) {
     inner_.reset(bvh_.nodes.size());
     for (uint32_t i = 0; i < bvh_.nodes.size(); ++i) {
       const BvhNode& n = bvh_.nodes[i];
@@ -779,11 +788,6 @@ class InsertionOptimizer {
   }
 
   bool is_touched(uint32_t n) const { return n != kInvalidNode && touched_.contains(n); }
-  bool inside(uint32_t x, uint32_t subtree_root) const {
-    for (; x != kInvalidNode; x = bvh_[x].parent)
-      if (x == subtree_root) return true;
-    return false;
-  }
 
   // Takes `m` and its parent out (the parent becomes free, the sibling takes its place);
   // m keeps its subtree.
@@ -821,7 +825,7 @@ class InsertionOptimizer {
     for (uint32_t v : involved)
       if (is_touched(v)) return 0;
     // Earlier moves may have carried the target into m's subtree; linking there would make a cycle.
-    if (inside(x, m)) return 0;
+    if (detail::in_subtree(bvh_, x, m)) return 0;
 
     BvhNode saved[6];
     for (int i = 0; i < 6; ++i)
@@ -871,7 +875,7 @@ class InsertionOptimizer {
   size_t inner_count_ = 0;
   std::vector<uint64_t> keys_;
   detail::LargestKeys largest_;
-  detail::LargestFromRoot from_root_;
+  detail::LargestFromRoot& from_root_;
   std::vector<Plan> plans_;
   std::vector<uint32_t> by_id_;         // the candidates' indices, by their ids' buckets
   std::vector<uint32_t> bucket_start_;  // order_by_id's counts
@@ -987,7 +991,8 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
   // Each stage starts afresh from the tree the last one left (its tracked sums included).
   // The first one also tells the initial cost: its sums are a scan of the whole array (4M
   // triangles: 67 ms), not worth making twice.
-  std::optional<InsertionOptimizer> stage(std::in_place, bvh, config, stages.front(), after_move);
+  detail::LargestFromRoot from_root;
+  std::optional<InsertionOptimizer> stage(std::in_place, bvh, config, stages.front(), after_move, from_root);
   // A zero-area root has no ratio to track: its cost is the limit sah_cost defines, as
   // every optimizer reports it.
   driver.set_initial_cost(stage->can_optimize() ? stage->cost() : sah_cost(bvh, config.cost));
@@ -1027,7 +1032,7 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     // 0.95 at 1M (medians of six and eight pairs), 40.6 s against 44.9 at 10M (one pair).
     size_t k = 0;
     for (; k < stages.size(); ++k) {
-      if (k > 0) stage.emplace(bvh, config, stages[k], after_move);
+      if (k > 0) stage.emplace(bvh, config, stages[k], after_move, from_root);
       reserve_for(stages[k]);
       driver.run(*stage);
       if (driver.stop_reason() != StopReason::converged) break;
@@ -1035,7 +1040,7 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     if (closing_sweeps && k < stages.size() && stages[k].kind != PassKind::rotation &&
         driver.stop_reason() == StopReason::time_limit) {
       driver.expect_first_pass(sweep_seconds);
-      stage.emplace(bvh, config, sweep_stage(), after_move);
+      stage.emplace(bvh, config, sweep_stage(), after_move, from_root);
       reserve_for(sweep_stage());
       driver.run(*stage);
       // A sweep that gains too little ends the stage; the run stopped for its budget.
