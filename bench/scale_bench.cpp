@@ -2,8 +2,12 @@
 // to convergence, on the built-in hall at 1M and 4M triangles and on Conference, 2 threads.
 //
 //   scale_bench [--scene SPEC]... [--threads 2] [--json FILE] [--reference SPEC=COST]...
-//               [--budget N]
+//               [--budget N] [--repeat R]
 //
+// --repeat R runs each scene's optimization to convergence R times in all (default 1), the
+// scenes in turn (1M, 4M, Conference, then again), each run from a copy of the scene's sweep
+// tree, and reports the median time and the growth of the medians: on a shared machine one
+// run's time varies by 10 % or more, as much as the margin of the n log n target.
 // --budget N stops each optimizer run at N build times (then "converged" is only where the
 // run stopped, marked so); without it every run goes to convergence.
 //
@@ -24,6 +28,7 @@
 #include <malloc.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -112,6 +117,7 @@ struct Options {
   std::string json_path;
   std::map<std::string, double> references;  // scene spec -> a given converged cost
   double budget = 0.0;                          // in build times; 0: to convergence
+  int repeat = 1;                               // converged runs per scene, the scenes in turn
 };
 
 Options parse(int argc, char** argv) {
@@ -125,6 +131,8 @@ Options parse(int argc, char** argv) {
       opt.threads = std::max(1, std::atoi(args.value().c_str()));
     } else if (a == "--budget") {
       opt.budget = std::atof(args.value().c_str());
+    } else if (a == "--repeat") {
+      opt.repeat = std::max(1, std::atoi(args.value().c_str()));
     } else if (a == "--json") {
       opt.json_path = args.value();
     } else if (a == "--reference") {
@@ -156,7 +164,29 @@ struct Row {
   double build_bytes_per_tri = 0, optimize_bytes_per_tri = 0, rss_bytes_per_tri = 0;
   double reference = 0;  // 0: none given
   bool converged_run = true;
+  std::vector<double> converged_runs_s;  // every converged run's seconds, the first included
+  Bvh sweep_tree;                        // kept for the repeated runs (--repeat)
+
+  double median_converged_s() const {
+    std::vector<double> v = converged_runs_s;
+    std::sort(v.begin(), v.end());
+    const size_t m = v.size() / 2;
+    return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+  }
 };
+
+// One more converged run of a scene, from its sweep tree: its seconds, and whether it ended
+// where the first did (the optimizer is deterministic: the same tree, the same cost).
+double repeat_run(Row& row, const Options& opt) {
+  Bvh copy = row.sweep_tree;
+  InsertionConfig cfg;
+  cfg.limits.time_limit = opt.budget * row.build_s;
+  const OptimizeReport rep = optimize_insertion(copy, cfg);
+  if (rep.final_cost != row.converged)
+    throw Error("scale_bench: a repeated run of " + row.spec + " ended at " + std::to_string(rep.final_cost) +
+                ", the first at " + std::to_string(row.converged));
+  return rep.seconds;
+}
 
 Row run_scene(const std::string& spec, const Options& opt) {
   Row row;
@@ -176,6 +206,10 @@ Row run_scene(const std::string& spec, const Options& opt) {
   row.build_bytes_per_tri = static_cast<double>(g_peak.load() - mesh_bytes) / tris;
   row.sweep_cost = sah_cost(bvh, CostModel{});
 
+  // The copy kept for --repeat is not the optimizer's: its bytes are left out of the peak.
+  const int64_t before_copy = g_live.load();
+  if (opt.repeat > 1) row.sweep_tree = bvh;
+  const int64_t kept_bytes = g_live.load() - before_copy;
   // The budget runs, each on a copy, before the converged run's heap is measured.
   for (double times : {1.0, 5.0}) {
     if (opt.budget > 0 && times > opt.budget) continue;
@@ -201,12 +235,13 @@ Row run_scene(const std::string& spec, const Options& opt) {
   };
   const OptimizeReport rep = optimize_insertion(bvh, cfg);
   if (terminal) std::fprintf(stderr, "\n");
-  row.optimize_bytes_per_tri = static_cast<double>(g_peak.load() - mesh_bytes) / tris;
+  row.optimize_bytes_per_tri = static_cast<double>(g_peak.load() - mesh_bytes - kept_bytes) / tris;
   row.rss_bytes_per_tri = static_cast<double>(peak_rss()) / tris;
   row.cost_1x = cost_within(rep, row.build_s, true);
   row.cost_5x = cost_within(rep, 5.0 * row.build_s, true);
   row.converged = rep.final_cost;
   row.converged_s = rep.seconds;
+  row.converged_runs_s.push_back(rep.seconds);
   row.passes = rep.passes;
   row.converged_run = rep.stop_reason == StopReason::converged;
   if (auto it = opt.references.find(spec); it != opt.references.end()) row.reference = it->second;
@@ -257,7 +292,22 @@ void print(const std::vector<Row>& rows, int threads) {
                 static_cast<unsigned long long>(small->triangles), static_cast<unsigned long long>(large->triangles),
                 large->converged_s / small->converged_s, large->build_s / small->build_s, nlogn,
                 (large->converged_s / large->build_s) / (small->converged_s / small->build_s));
+    const size_t runs = std::min(small->converged_runs_s.size(), large->converged_runs_s.size());
+    if (runs > 1) {
+      std::printf("over %zu runs of each: medians %.2f s and %.2f s, x%.2f (n log n x%.2f); run by run:", runs,
+                  small->median_converged_s(), large->median_converged_s(),
+                  large->median_converged_s() / small->median_converged_s(), nlogn);
+      for (size_t i = 0; i < runs; ++i)
+        std::printf(" x%.2f", large->converged_runs_s[i] / small->converged_runs_s[i]);
+      std::printf("\n");
+    }
   }
+  for (const Row& r : rows)
+    if (r.converged_runs_s.size() > 1) {
+      std::printf("%s: converged in", r.spec.c_str());
+      for (double t : r.converged_runs_s) std::printf(" %.2f", t);
+      std::printf(" s (median %.2f)\n", r.median_converged_s());
+    }
 }
 
 }  // namespace
@@ -276,11 +326,17 @@ int main(int argc, char** argv) {
     for (const std::string& spec : opt.scenes) {
       rows.push_back(run_scene(spec, opt));
       // Each scene's figures as soon as they are known: the large runs take long.
-      const Row& r = rows.back();
+      Row& r = rows.back();
       std::fprintf(stderr, "%s: build %.2f s, sweep %.4f, 1x %.4f, 5x %.4f, end %.4f after %.1f s (%s), heap %.1f B/tri\n",
                    r.spec.c_str(), r.build_s, r.sweep_cost, r.cost_1x, r.cost_5x, r.converged, r.converged_s,
                    r.converged_run ? "converged" : "budget", r.optimize_bytes_per_tri);
     }
+    // The repeated runs, the scenes in turn, so that a slow phase of the machine falls on all.
+    for (int k = 1; k < opt.repeat; ++k)
+      for (Row& r : rows) {
+        r.converged_runs_s.push_back(repeat_run(r, opt));
+        std::fprintf(stderr, "%s: run %d converged after %.2f s\n", r.spec.c_str(), k + 1, r.converged_runs_s.back());
+      }
     print(rows, opt.threads);
     if (!opt.json_path.empty()) {
       nlohmann::json j = nlohmann::json::array();
@@ -298,6 +354,8 @@ int main(int argc, char** argv) {
                      {"seconds_of_5x_run", r.run_5x_s},
                      {"converged_cost", r.converged},
                      {"converged_seconds", r.converged_s},
+                     {"converged_seconds_runs", r.converged_runs_s},
+                     {"converged_seconds_median", r.median_converged_s()},
                      {"passes", r.passes},
                      {"heap_bytes_per_triangle_build", r.build_bytes_per_tri},
                      {"heap_bytes_per_triangle_optimize", r.optimize_bytes_per_tri},
