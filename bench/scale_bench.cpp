@@ -175,14 +175,15 @@ struct Row {
   }
 };
 
-// One more converged run of a scene, from its sweep tree: its seconds, and whether it ended
-// where the first did (the optimizer is deterministic: the same tree, the same cost).
+// One more run of a scene, from its sweep tree: its seconds. A converged run must end where
+// the first did (the optimizer is deterministic: the same tree, the same cost); a run stopped
+// by --budget ends wherever its time ran out.
 double repeat_run(Row& row, const Options& opt) {
   Bvh copy = row.sweep_tree;
   InsertionConfig cfg;
   cfg.limits.time_limit = opt.budget * row.build_s;
   const OptimizeReport rep = optimize_insertion(copy, cfg);
-  if (rep.final_cost != row.converged)
+  if (opt.budget == 0.0 && rep.final_cost != row.converged)
     throw Error("scale_bench: a repeated run of " + row.spec + " ended at " + std::to_string(rep.final_cost) +
                 ", the first at " + std::to_string(row.converged));
   return rep.seconds;
