@@ -327,7 +327,7 @@ int main(int argc, char** argv) {
     for (const std::string& spec : opt.scenes) {
       rows.push_back(run_scene(spec, opt));
       // Each scene's figures as soon as they are known: the large runs take long.
-      Row& r = rows.back();
+      const Row& r = rows.back();
       std::fprintf(stderr, "%s: build %.2f s, sweep %.4f, 1x %.4f, 5x %.4f, end %.4f after %.1f s (%s), heap %.1f B/tri\n",
                    r.spec.c_str(), r.build_s, r.sweep_cost, r.cost_1x, r.cost_5x, r.converged, r.converged_s,
                    r.converged_run ? "converged" : "budget", r.optimize_bytes_per_tri);

@@ -206,6 +206,23 @@ TEST_F(BadInput, PlyFirstLineWithMoreThanPlyIsRejected) {
   expect_rejected(write("blank_first.ply", "\nply\n" + header_rest), {"first line is not exactly 'ply'"});
 }
 
+// Found by fuzz/scene_file_fuzzer: assimp hung on a header with a second format line of more
+// than three words (this 69-byte file; CI's fuzzing run timed out on it).
+TEST_F(BadInput, PlyHeaderHasOneFormatLineOfThreeWords) {
+  expect_rejected(write("two_formats.ply",
+                        "ply\nformat ascii 0eme0ly\nformat ascii 0eme0.]eln.]elnt e 4\nend_header"),
+                  {"header line 3", "a second format line", "(a PLY header has one)"});
+  expect_rejected(write("format_twice.ply", "ply\nformat ascii 1.0\nformat ascii 1.0\n" +
+                                                small_ply(true, 50).substr(std::string("ply\nformat ascii 1.0\n").size())),
+                  {"header line 3", "a second format line"});
+  expect_rejected(write("format_long.ply", "ply\nformat ascii 1.0 e 4\nend_header\n"),
+                  {"header line 2", "malformed format line 'format ascii 1.0 e 4'", "expected format TYPE VERSION"});
+  expect_rejected(write("format_short.ply", "ply\nformat ascii\nend_header\n"),
+                  {"header line 2", "malformed format line"});
+  // The well-formed file still loads.
+  EXPECT_EQ(load_mesh_file(write("one_format.ply", small_ply(true, 50))).triangle_count(), 48u);
+}
+
 // Found by fuzz/scene_file_fuzzer: a misspelt "property" line was skipped by the pre-check
 // and by assimp alike, which then read the data by another layout and aborted on an
 // assertion (exit 134).

@@ -81,7 +81,15 @@ PlyHeader read_ply_header(std::istream& in, const std::string& where) {
     std::string word;
     words >> word;
     if (word == "format") {
-      words >> h.format;
+      // One "format TYPE VERSION" line. Assimp hangs on a second format line with more words
+      // (found by fuzz/scene_file_fuzzer: "format ascii 1.0" then "format ascii 1.0 e 4").
+      if (!h.format.empty())
+        throw Error(where + ": header line " + std::to_string(line) + ": a second format line '" + printable(text) +
+                    "' (a PLY header has one)");
+      std::string version, extra;
+      if (!(words >> h.format >> version) || (words >> extra))
+        throw Error(where + ": header line " + std::to_string(line) + ": malformed format line '" + printable(text) +
+                    "' (expected format TYPE VERSION)");
     } else if (word == "element") {
       PlyElement e;
       std::string count;
