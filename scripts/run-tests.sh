@@ -6,5 +6,5 @@ cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
 cmake --preset release -DBVHOPT_BUILD_TESTS=ON >/dev/null
 cmake --build --preset release
-echo "== built in $SECONDS s; the tests:"
+echo "== set up and built in $SECONDS s; the tests:"
 ctest --preset release -j 2 --no-tests=error "$@"
