@@ -15,7 +15,6 @@
 namespace bvhopt {
 namespace {
 
-Bvh median_tree(const PrimitiveRefs& refs) { return build_object_median(refs, MedianConfig{}); }
 
 TEST(AnnealSchedule, MatchesKenslersFormula) {
   const uint32_t n = 1250, f = 50;
@@ -47,7 +46,7 @@ OracleResult run_oracle(uint32_t sizes_from, uint32_t sizes_to, uint64_t seeds) 
   for (uint32_t count = sizes_from; count <= sizes_to; ++count) {
     for (uint64_t s = 1; s <= seeds; ++s) {
       PrimitiveRefs refs = testing::random_refs(count, 1000 * count + s);
-      Bvh bvh = median_tree(refs);
+      Bvh bvh = testing::median_tree(refs);
       AnnealConfig cfg;
       cfg.seed = s;
       OptimizeReport rep = anneal(bvh, cfg);
@@ -82,7 +81,7 @@ TEST(Anneal, HillClimbingAloneDoesNotAlwaysReachTheOptimum) {
   for (uint32_t count = 6; count <= 10; ++count)
     for (uint64_t s = 1; s <= 8; ++s) {
       PrimitiveRefs refs = testing::random_refs(count, 1000 * count + s);
-      Bvh bvh = median_tree(refs);
+      Bvh bvh = testing::median_tree(refs);
       hill_climb(bvh);
       const double opt = testing::optimal_tree_cost(refs, model.traversal, model.intersection) / bvh[bvh.root].area();
       ++cases;
@@ -93,7 +92,7 @@ TEST(Anneal, HillClimbingAloneDoesNotAlwaysReachTheOptimum) {
 
 TEST(Anneal, KeepBestReturnsTheBestPassAndNeverWorsens) {
   PrimitiveRefs refs = testing::random_refs(3000, 21);
-  Bvh bvh = median_tree(refs);
+  Bvh bvh = testing::median_tree(refs);
   AnnealConfig cfg;
   cfg.schedule_passes = 150;
   cfg.h = 2.2;
@@ -122,7 +121,7 @@ TEST(Anneal, KeepBestReturnsTheBestPassAndNeverWorsens) {
 
 TEST(Anneal, WithoutKeepBestReturnsTheLastTree) {
   PrimitiveRefs refs = testing::random_refs(2000, 22);
-  Bvh bvh = median_tree(refs);
+  Bvh bvh = testing::median_tree(refs);
   AnnealConfig cfg;
   cfg.schedule_passes = 1250;  // stopped by the pass limit while hot
   cfg.limits.max_passes = 40;
@@ -138,7 +137,7 @@ TEST(Anneal, WithoutKeepBestReturnsTheLastTree) {
 
 TEST(Anneal, SameSeedSameTreeOnOneAndTwoThreadsAndSeedsDiffer) {
   PrimitiveRefs refs = testing::random_refs(30000, 23);
-  Bvh start = median_tree(refs);
+  Bvh start = testing::median_tree(refs);
   auto run = [&](uint64_t seed, int threads) {
     tbb::global_control gc(tbb::global_control::max_allowed_parallelism, threads);
     Bvh bvh = start;
@@ -155,7 +154,7 @@ TEST(Anneal, SameSeedSameTreeOnOneAndTwoThreadsAndSeedsDiffer) {
 
 TEST(Anneal, PassLimitOfOneGivesOnePass) {
   PrimitiveRefs refs = testing::random_refs(500, 24);
-  Bvh bvh = median_tree(refs);
+  Bvh bvh = testing::median_tree(refs);
   AnnealConfig cfg;
   cfg.limits.max_passes = 1;
   OptimizeReport rep = anneal(bvh, cfg);

@@ -18,12 +18,6 @@ namespace fs = std::filesystem;
 namespace bvhopt {
 namespace {
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
 
 class AtomicFile : public ::testing::Test {
  protected:
@@ -44,9 +38,9 @@ class AtomicFile : public ::testing::Test {
 TEST_F(AtomicFile, WritesAndReplaces) {
   fs::path p = dir_ / "out.txt";
   write_text_atomically(p, "first");
-  EXPECT_EQ(slurp(p), "first");
+  EXPECT_EQ(testing::read_text(p), "first");
   write_text_atomically(p, "second, longer");
-  EXPECT_EQ(slurp(p), "second, longer");
+  EXPECT_EQ(testing::read_text(p), "second, longer");
   EXPECT_EQ(entries(), 1u) << "no temporary left behind";
 }
 
@@ -60,7 +54,7 @@ TEST_F(AtomicFile, FailedWriteLeavesTheOldFileAndNoTemporary) {
                                   throw Error("disk full");
                                 }),
                Error);
-  EXPECT_EQ(slurp(p), "old contents");
+  EXPECT_EQ(testing::read_text(p), "old contents");
   EXPECT_EQ(entries(), 1u);
 }
 
@@ -145,7 +139,7 @@ TEST_F(AtomicFile, SymlinkIsWrittenThrough) {
   fs::create_symlink(fs::path("real") / "out.txt", link);
   write_text_atomically(link, "new");
   EXPECT_TRUE(fs::is_symlink(link));
-  EXPECT_EQ(slurp(target), "new");
+  EXPECT_EQ(testing::read_text(target), "new");
   EXPECT_EQ(entries(), 2u);
 }
 
@@ -155,7 +149,7 @@ TEST_F(AtomicFile, DanglingSymlinkCreatesItsTarget) {
   fs::create_symlink("made_through_link.txt", link);
   write_text_atomically(link, "new");
   EXPECT_TRUE(fs::is_symlink(link));
-  EXPECT_EQ(slurp(dir_ / "made_through_link.txt"), "new");
+  EXPECT_EQ(testing::read_text(dir_ / "made_through_link.txt"), "new");
 }
 
 }  // namespace

@@ -42,7 +42,7 @@ class BvhFileTest : public ::testing::Test {
   fs::path dir_;
 };
 
-std::vector<unsigned char> slurp(const fs::path& p) {
+std::vector<unsigned char> file_bytes(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
@@ -67,7 +67,7 @@ void reseal(std::vector<unsigned char>& bytes) {
 }
 
 // Runs the reader and returns its message ("" if it did not throw).
-std::string read_error(const fs::path& p) {
+std::string bvh_read_error(const fs::path& p) {
   try {
     read_bvh_file(p);
   } catch (const Error& e) {
@@ -96,16 +96,6 @@ Sample sample(uint32_t triangles, uint64_t seed, BuilderKind kind = BuilderKind:
   return s;
 }
 
-void expect_same_tree(const Bvh& got, const Bvh& want) {
-  ASSERT_EQ(got.nodes.size(), want.nodes.size());
-  EXPECT_EQ(got.root, want.root);
-  for (size_t i = 0; i < want.nodes.size(); ++i) {
-    // Bit-identical: boxes, cached areas, links.
-    ASSERT_EQ(std::memcmp(&got.nodes[i], &want.nodes[i], sizeof(BvhNode)), 0) << "node " << i;
-  }
-  EXPECT_EQ(got.ref_indices, want.ref_indices);
-}
-
 TEST_F(BvhFileTest, RoundTripForEveryBuilder) {
   for (BuilderKind kind : all_builders())
     for (uint32_t leaf : {1u, 4u})
@@ -116,7 +106,7 @@ TEST_F(BvhFileTest, RoundTripForEveryBuilder) {
         BvhFile f = read_bvh_file(p);
         Bvh want = s.bvh;
         want.renumber_depth_first();  // the file stores the depth-first numbering
-        expect_same_tree(f.bvh, want);
+        EXPECT_TRUE(testing::same_nodes(f.bvh, want));
         ASSERT_EQ(f.refs.size(), s.refs.size());
         for (size_t r = 0; r < s.refs.size(); ++r) {
           ASSERT_EQ(std::memcmp(&f.refs.boxes[r], &s.refs.boxes[r], sizeof(Box)), 0);
@@ -131,7 +121,7 @@ TEST_F(BvhFileTest, RoundTripForEveryBuilder) {
         // Writing what was read gives the same bytes.
         fs::path q = dir_ / "again.bvh";
         write_bvh_file(q, f.bvh, f.refs, f.info);
-        EXPECT_EQ(slurp(p), slurp(q));
+        EXPECT_EQ(file_bytes(p), file_bytes(q));
       }
 }
 
@@ -153,7 +143,7 @@ TEST_F(BvhFileTest, RoundTripOfATreeWithUnreachableNodesAndScatteredSlots) {
   BvhFile f = read_bvh_file(p);
   Bvh want = s.bvh;
   want.renumber_depth_first();
-  expect_same_tree(f.bvh, want);
+  EXPECT_TRUE(testing::same_nodes(f.bvh, want));
   EXPECT_EQ(testing::tree_signature(f.bvh, f.refs), testing::tree_signature(s.bvh, s.refs));
 }
 
@@ -172,7 +162,7 @@ TEST_F(BvhFileTest, RoundTripOnTheBuiltInScene) {
     write_bvh_file(p, bvh, refs, info);
     BvhFile f = read_bvh_file(p);
     bvh.renumber_depth_first();
-    expect_same_tree(f.bvh, bvh);
+    EXPECT_TRUE(testing::same_nodes(f.bvh, bvh));
     EXPECT_EQ(testing::tree_signature(f.bvh, f.refs), testing::tree_signature(bvh, refs));
     EXPECT_EQ(f.info.scene_triangles, mesh.triangle_count());
   }
@@ -195,13 +185,13 @@ class Rejections : public BvhFileTest {
     good_ = dir_ / "good.bvh";
     bad_ = dir_ / "bad.bvh";
     write_bvh_file(good_, s_.bvh, s_.refs, s_.info);
-    bytes_ = slurp(good_);
-    ASSERT_EQ(read_error(good_), "");
+    bytes_ = file_bytes(good_);
+    ASSERT_EQ(bvh_read_error(good_), "");
   }
   // Writes the damaged bytes and returns the reader's message, which must name the file.
   std::string damaged(const std::vector<unsigned char>& b) {
     spit(bad_, b);
-    std::string e = read_error(bad_);
+    std::string e = bvh_read_error(bad_);
     EXPECT_NE(e, "") << "accepted a damaged file";
     EXPECT_NE(e.find(bad_.string()), std::string::npos) << e;
     return e;
@@ -214,9 +204,9 @@ class Rejections : public BvhFileTest {
 };
 
 TEST_F(Rejections, MissingFileAndDirectory) {
-  std::string e = read_error(dir_ / "nope.bvh");
+  std::string e = bvh_read_error(dir_ / "nope.bvh");
   EXPECT_NE(e.find("nope.bvh: cannot open"), std::string::npos) << e;
-  EXPECT_NE(read_error(dir_), "");
+  EXPECT_NE(bvh_read_error(dir_), "");
 }
 
 TEST_F(Rejections, WrongMagic) {
@@ -279,7 +269,7 @@ TEST_F(Rejections, EveryFlippedByteIsCaught) {
   for (size_t at = 0; at < bytes_.size(); ++at) {
     for (unsigned char mask : {0x01, 0x80}) {
       put(at, bytes_[at] ^ mask);
-      std::string e = read_error(bad_);
+      std::string e = bvh_read_error(bad_);
       ASSERT_NE(e, "") << "accepted a flip of byte " << at;
       EXPECT_NE(e.find(bad_.string()), std::string::npos) << e;
       const size_t name_end = kFixedHeader + s_.info.scene_name.size();
@@ -291,7 +281,7 @@ TEST_F(Rejections, EveryFlippedByteIsCaught) {
     }
     put(at, bytes_[at]);
   }
-  EXPECT_EQ(read_error(bad_), "");
+  EXPECT_EQ(bvh_read_error(bad_), "");
 }
 
 // A later minor addition at the end of the header (covered by header_size) is skipped.
@@ -494,7 +484,7 @@ TEST_F(BvhFileTest, FailedWriteLeavesTheOldFileIntact) {
   Sample old = sample(30, 1);
   fs::path p = dir_ / "t.bvh";
   write_bvh_file(p, old.bvh, old.refs, old.info);
-  const auto before = slurp(p);
+  const auto before = file_bytes(p);
 
   // A tree the reader would refuse is refused before anything is written. (A write that
   // fails half way is tested on write_atomically itself, in atomic_file_test.)
@@ -507,7 +497,7 @@ TEST_F(BvhFileTest, FailedWriteLeavesTheOldFileIntact) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find(p.string()), std::string::npos) << e.what();
   }
-  EXPECT_EQ(slurp(p), before);
+  EXPECT_EQ(file_bytes(p), before);
 
   // The target is a directory: the rename fails after a complete write; the temporary
   // must be gone afterwards.
@@ -521,7 +511,7 @@ TEST_F(BvhFileTest, FailedWriteLeavesTheOldFileIntact) {
 
   // Afterwards a normal write replaces the file.
   write_bvh_file(p, next.bvh, next.refs, next.info);
-  EXPECT_NE(slurp(p), before);
+  EXPECT_NE(file_bytes(p), before);
   EXPECT_EQ(read_bvh_file(p).refs.size(), 60u);
 }
 

@@ -34,7 +34,13 @@ namespace fs = std::filesystem;
 using Cli = testing::ProgramTest;
 using CliRun = testing::ProgramTest::Result;
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
+// Built by appending: GCC 12 warns falsely (-Wstringop-overflow) on "'" + p.string() + "'".
+std::string q(const fs::path& p) {
+  std::string quoted = "'";
+  quoted += p.string();
+  quoted += '\'';
+  return quoted;
+}
 
 void write_file(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
 

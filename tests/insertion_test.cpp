@@ -88,7 +88,6 @@ Bvh build_start(const PrimitiveRefs& refs, int kind) {
   }
 }
 
-double relative_gap(double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-300); }
 
 // The optimizer's area keys of a tree (the root's the smallest), and the k largest of them
 // by a full sort, without the root's: what LargestFromRoot must give.
@@ -591,13 +590,13 @@ void check_every_move(InsertionForm form, InsertionMeasure measure) {
     ValidationReport v = validate(t, refs);
     ASSERT_TRUE(v.ok()) << v.summary();
     ASSERT_EQ(t.nodes.size(), 2 * refs.size() - 1);
-    ASSERT_LT(relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
+    ASSERT_LT(testing::relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
     ++checked;
   };
   OptimizeReport r = testing::optimize_insertion_observed(bvh, cfg, after_move);
   EXPECT_GT(checked, 20u);
   EXPECT_TRUE(validate(bvh, refs).ok());
-  EXPECT_LT(relative_gap(r.final_cost, sah_cost(bvh)), 1e-9);
+  EXPECT_LT(testing::relative_gap(r.final_cost, sah_cost(bvh)), 1e-9);
   EXPECT_LT(r.final_cost, r.initial_cost * 0.99);
 }
 
@@ -886,13 +885,13 @@ TEST(InsertionOptimizer, RotationSweepsOnlyLowerTheTreeAndKeepItValid) {
       auto after_move = [&](const Bvh& t, double tracked) {
         ValidationReport v = validate(t, refs);
         ASSERT_TRUE(v.ok()) << v.summary();
-        ASSERT_LT(relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
+        ASSERT_LT(testing::relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
         ++checked;
       };
       OptimizeReport r = testing::optimize_insertion_observed(bvh, cfg, after_move);
       ASSERT_EQ(r.stop_reason, StopReason::converged);
       EXPECT_GT(checked, 0u);
-      EXPECT_LT(relative_gap(r.final_cost, sah_cost(bvh)), 1e-9);
+      EXPECT_LT(testing::relative_gap(r.final_cost, sah_cost(bvh)), 1e-9);
       final_cost[rotations] = r.final_cost;
     }
     EXPECT_LE(final_cost[1], final_cost[0]) << "seed " << seed;
@@ -907,7 +906,7 @@ TEST(InsertionOptimizer, RotationSweepsOnlyLowerTheTreeAndKeepItValid) {
   uint32_t sweeps = 0;
   auto after_move = [&](const Bvh& t, double tracked) {
     ASSERT_TRUE(validate(t, refs).ok());
-    ASSERT_LT(relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
+    ASSERT_LT(testing::relative_gap(tracked, sah_cost(t)), 1e-9) << tracked << " vs " << sah_cost(t);
   };
   cfg.limits.on_pass = [&](const PassRecord& p) { sweeps += p.stage == 2 || p.stage == 4 || p.stage == 6; };
   OptimizeReport r = testing::optimize_insertion_observed(bvh, cfg, after_move);

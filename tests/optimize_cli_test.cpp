@@ -23,7 +23,6 @@ namespace fs = std::filesystem;
 namespace bvhopt {
 namespace {
 
-std::string slurp(const fs::path& p) { return testing::read_text(p); }
 
 class OptimizeCli : public testing::ProgramTest {
  protected:
@@ -64,7 +63,7 @@ TEST_F(OptimizeCli, SceneToAnnealedFileWithTraceAndJson) {
   EXPECT_NEAR(sah_cost(file.bvh, file.info.cost), j["cost_after"].get<double>(), 1e-9 * j["cost_after"].get<double>());
   EXPECT_EQ(file.info.method, "sweep+anneal");
 
-  std::vector<std::string> rows = lines(slurp(csv));
+  std::vector<std::string> rows = lines(testing::read_text(csv));
   ASSERT_FALSE(rows.empty());
   EXPECT_EQ(rows[0], "pass,cost,best_cost,temperature,moves,seconds,stage");
   EXPECT_EQ(rows.size(), j["passes"].get<size_t>() + 2);  // header, pass 0 (the input), every pass

@@ -27,7 +27,6 @@
 namespace bvhopt {
 namespace {
 
-double relative_gap(double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-300); }
 
 // A short annealing schedule: hot passes that raise the cost, then the quench.
 AnnealConfig short_anneal() {
@@ -57,8 +56,8 @@ void expect_rotation_costs_exact(const Bvh& start, Config cfg, Optimize optimize
   Bvh full = start;
   const OptimizeReport all = optimize(full, cfg);
   ASSERT_GT(all.passes, 3u);
-  EXPECT_LT(relative_gap(all.final_cost, sah_cost(full)), 1e-9);
-  EXPECT_LT(relative_gap(all.initial_cost, sah_cost(start)), 1e-9);
+  EXPECT_LT(testing::relative_gap(all.final_cost, sah_cost(full)), 1e-9);
+  EXPECT_LT(testing::relative_gap(all.initial_cost, sah_cost(start)), 1e-9);
   for (uint32_t k = 1; k <= all.passes; ++k) {
     Bvh bvh = start;
     cfg.limits.max_passes = k;
@@ -66,7 +65,7 @@ void expect_rotation_costs_exact(const Bvh& start, Config cfg, Optimize optimize
     ASSERT_EQ(r.passes, k);
     EXPECT_EQ(r.trace.back().cost, all.trace[k - 1].cost) << "pass " << k;
     EXPECT_EQ(r.final_cost, r.trace.back().cost) << "pass " << k;
-    EXPECT_LT(relative_gap(r.final_cost, sah_cost(bvh)), 1e-9) << "pass " << k;
+    EXPECT_LT(testing::relative_gap(r.final_cost, sah_cost(bvh)), 1e-9) << "pass " << k;
   }
 }
 
@@ -89,14 +88,14 @@ TEST(OptimizerDriver, InsertionCostsAreTheTreesCosts) {
     InsertionConfig cfg = insertion_of(form);
     uint32_t checked = 0;
     cfg.limits.on_pass = [&](const PassRecord& p) {
-      EXPECT_LT(relative_gap(p.cost, sah_cost(bvh)), 1e-9) << form_name(form) << " pass " << p.pass;
+      EXPECT_LT(testing::relative_gap(p.cost, sah_cost(bvh)), 1e-9) << form_name(form) << " pass " << p.pass;
       ++checked;
     };
     const OptimizeReport r = optimize_insertion(bvh, cfg);
     EXPECT_EQ(checked, r.passes);
     EXPECT_GT(r.passes, 3u);
-    EXPECT_LT(relative_gap(r.initial_cost, before), 1e-9) << form_name(form);
-    EXPECT_LT(relative_gap(r.final_cost, sah_cost(bvh)), 1e-9) << form_name(form);
+    EXPECT_LT(testing::relative_gap(r.initial_cost, before), 1e-9) << form_name(form);
+    EXPECT_LT(testing::relative_gap(r.final_cost, sah_cost(bvh)), 1e-9) << form_name(form);
     double best = r.initial_cost;
     for (const PassRecord& p : r.trace) best = std::min(best, p.cost);
     EXPECT_EQ(r.trace.back().best_cost, best);

@@ -164,7 +164,9 @@ TEST(RankWindows, PartitionCutsTheRankingIntoOrderedWindowsOfAboutK) {
     uint64_t lo = ~uint64_t{0}, hi = 0;
     for (size_t j = starts[w]; j < starts[w + 1]; ++j) {
       ASSERT_TRUE(member[ids[j]]);
-      if (j > starts[w]) EXPECT_LT(ids[j - 1], ids[j]) << "index order within a window";
+      if (j > starts[w]) {
+        EXPECT_LT(ids[j - 1], ids[j]) << "index order within a window";
+      }
       lo = std::min(lo, keys[ids[j]]);
       hi = std::max(hi, keys[ids[j]]);
     }

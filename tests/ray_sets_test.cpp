@@ -205,7 +205,7 @@ TEST(RaySets, FileRoundTripIsExact) {
   }
 }
 
-std::string read_error(const fs::path& p) {
+std::string ray_read_error(const fs::path& p) {
   try {
     read_ray_file(p);
   } catch (const Error& e) {
@@ -234,35 +234,35 @@ TEST(RaySets, BadFilesAreRejectedWithClearMessages) {
     return b;
   };
 
-  EXPECT_NE(read_error(temp_path("missing.rays")).find("cannot open"), std::string::npos);
+  EXPECT_NE(ray_read_error(temp_path("missing.rays")).find("cannot open"), std::string::npos);
   write_bytes(std::vector<char>(good.begin(), good.begin() + 20));
-  EXPECT_NE(read_error(p).find("too short"), std::string::npos);
+  EXPECT_NE(ray_read_error(p).find("too short"), std::string::npos);
   write_bytes(patched(0, "NOTRAYS!", 8));
-  EXPECT_NE(read_error(p).find("magic"), std::string::npos);
+  EXPECT_NE(ray_read_error(p).find("magic"), std::string::npos);
   const uint32_t v2 = 2;
   write_bytes(patched(8, &v2, 4));
-  EXPECT_NE(read_error(p).find("version 2"), std::string::npos);
+  EXPECT_NE(ray_read_error(p).find("version 2"), std::string::npos);
   const uint32_t kind9 = 9;
   write_bytes(patched(12, &kind9, 4));
-  EXPECT_NE(read_error(p).find("unknown ray kind"), std::string::npos);
+  EXPECT_NE(ray_read_error(p).find("unknown ray kind"), std::string::npos);
   write_bytes(std::vector<char>(good.begin(), good.end() - 5));
-  EXPECT_NE(read_error(p).find("truncated"), std::string::npos);
+  EXPECT_NE(ray_read_error(p).find("truncated"), std::string::npos);
   std::vector<char> flipped = good;
   flipped[64 + 32 * 50 + 3] ^= 0x10;
   write_bytes(flipped);
-  EXPECT_NE(read_error(p).find("checksum"), std::string::npos);
+  EXPECT_NE(ray_read_error(p).find("checksum"), std::string::npos);
   // A well-formed file (right checksum) holding an untraceable ray.
   RaySet bad = set;
   bad.rays[7].dir = Vec3(0.0f);
   write_ray_file(p, bad);
-  EXPECT_NE(read_error(p).find("ray 7"), std::string::npos);
+  EXPECT_NE(ray_read_error(p).find("ray 7"), std::string::npos);
   bad = set;
   bad.rays[8].org.x = std::nanf("");
   write_ray_file(p, bad);
-  EXPECT_NE(read_error(p).find("ray 8"), std::string::npos);
+  EXPECT_NE(ray_read_error(p).find("ray 8"), std::string::npos);
   // The good file still reads.
   write_bytes(good);
-  EXPECT_EQ(read_error(p), "");
+  EXPECT_EQ(ray_read_error(p), "");
   fs::remove(p);
   // Writing into a missing folder fails with the file named, leaving nothing behind.
   const fs::path nowhere = temp_path("no_such_dir") / "x.rays";

@@ -18,7 +18,6 @@
 namespace bvhopt {
 namespace {
 
-Bvh median_tree(const PrimitiveRefs& refs) { return build_object_median(refs, MedianConfig{}); }
 
 std::vector<uint32_t> inner_nodes(const Bvh& bvh) {
   std::vector<uint32_t> inner;
@@ -41,7 +40,7 @@ TEST(Rotations, PublicMovesKeepTreeValidAndChangeCostByTheirDelta) {
   const CostModel model;
   for (uint64_t seed = 1; seed <= 5; ++seed) {
     PrimitiveRefs refs = testing::random_refs(60, seed);
-    Bvh bvh = median_tree(refs);
+    Bvh bvh = testing::median_tree(refs);
     std::vector<uint32_t> inner = inner_nodes(bvh);
     std::mt19937_64 rng(seed);
     const double root_area = bvh[bvh.root].area();
@@ -69,7 +68,7 @@ TEST(Rotations, EngineMovesMatchPublicMovesAndTrackCosts) {
   const CostModel model;
   for (uint64_t seed = 11; seed <= 15; ++seed) {
     PrimitiveRefs refs = testing::random_refs(80, seed);
-    Bvh reference = median_tree(refs);
+    Bvh reference = testing::median_tree(refs);
     detail::RotationEngine engine(reference, model);
     std::mt19937_64 rng(seed);
     double tracked = engine.tree_cost() * engine.root_area();  // unnormalized, updated by deltas
@@ -128,7 +127,7 @@ TEST(Rotations, EngineMovesMatchPublicMovesAndTrackCosts) {
 TEST(Rotations, PassesKeepEveryNodeCostExact) {
   const CostModel model;
   PrimitiveRefs refs = testing::random_refs(3000, 7);
-  Bvh bvh = median_tree(refs);
+  Bvh bvh = testing::median_tree(refs);
   detail::RotationEngine engine(bvh, model);
   for (uint32_t pass = 0; pass < 6; ++pass) {
     uint64_t moves = engine.run_pass(pass % 2 ? 1.5 : 0.0, 10.0, 99, pass);
@@ -157,7 +156,7 @@ TEST(Rotations, PassesKeepEveryNodeCostExact) {
 TEST(Rotations, RelayoutChangesNothingButMemoryOrder) {
   const CostModel model;
   PrimitiveRefs refs = testing::random_refs(6000, 8);
-  Bvh bvh = median_tree(refs);
+  Bvh bvh = testing::median_tree(refs);
   detail::RotationEngine a(bvh, model), b(bvh, model);
   for (uint32_t pass = 0; pass < 8; ++pass) {
     const double t = pass % 2 ? 1.0 : 0.0;
@@ -189,7 +188,7 @@ TEST(HillClimb, NeverRaisesCostAndEndsInALocalMinimum) {
   for (uint64_t seed = 1; seed <= 4; ++seed) {
     for (uint32_t count : {2u, 3u, 17u, 500u, 5000u}) {
       PrimitiveRefs refs = testing::random_refs(count, seed * 100 + count);
-      Bvh bvh = seed % 2 ? median_tree(refs) : build_sweep_sah(refs);
+      Bvh bvh = seed % 2 ? testing::median_tree(refs) : build_sweep_sah(refs);
       const double before = sah_cost(bvh, model);
       OptimizeReport rep = hill_climb(bvh);
       ASSERT_TRUE(validate(bvh, refs).ok()) << validate(bvh, refs).summary();
@@ -215,7 +214,7 @@ TEST(HillClimb, NeverRaisesCostAndEndsInALocalMinimum) {
 
 TEST(HillClimb, ImprovesAMedianTree) {
   PrimitiveRefs refs = testing::random_refs(2000, 3);
-  Bvh bvh = median_tree(refs);
+  Bvh bvh = testing::median_tree(refs);
   OptimizeReport rep = hill_climb(bvh);
   EXPECT_LT(rep.final_cost, 0.99 * rep.initial_cost);
   EXPECT_GT(rep.moves, 0u);
@@ -225,7 +224,7 @@ TEST(HillClimb, ImprovesAMedianTree) {
 TEST(HillClimb, SameTreeOnOneAndTwoThreads) {
   // Enough leaves that a pass is cut into many parallel pieces plus a top part.
   PrimitiveRefs refs = testing::random_refs(40000, 5);
-  Bvh start = median_tree(refs);
+  Bvh start = testing::median_tree(refs);
   std::string sig[2];
   for (int threads = 1; threads <= 2; ++threads) {
     tbb::global_control gc(tbb::global_control::max_allowed_parallelism, threads);
@@ -238,7 +237,7 @@ TEST(HillClimb, SameTreeOnOneAndTwoThreads) {
 
 TEST(HillClimb, PassAndTimeLimits) {
   PrimitiveRefs refs = testing::random_refs(3000, 9);
-  Bvh start = median_tree(refs);
+  Bvh start = testing::median_tree(refs);
   {
     Bvh bvh = start;
     HillClimbConfig cfg;
@@ -276,13 +275,13 @@ TEST(HillClimb, PassAndTimeLimits) {
 TEST(HillClimb, DegenerateInputs) {
   // One leaf: nothing to do.
   PrimitiveRefs one = make_references({Box({0, 0, 0}, {1, 1, 1})});
-  Bvh bvh = median_tree(one);
+  Bvh bvh = testing::median_tree(one);
   OptimizeReport rep = hill_climb(bvh);
   EXPECT_EQ(rep.passes, 0u);
   EXPECT_EQ(rep.stop_reason, StopReason::converged);
   // All boxes one point: zero root area, the cost is defined by the limit and stays.
   PrimitiveRefs points = make_references(std::vector<Box>(9, Box({1, 2, 3}, {1, 2, 3})));
-  Bvh p = median_tree(points);
+  Bvh p = testing::median_tree(points);
   rep = hill_climb(p);
   EXPECT_TRUE(validate(p, points).ok());
   EXPECT_EQ(rep.final_cost, rep.initial_cost);
@@ -290,7 +289,7 @@ TEST(HillClimb, DegenerateInputs) {
   std::vector<Box> boxes;
   for (int i = 0; i < 300; ++i) boxes.push_back(i % 3 ? Box({float(i), 0, 0}, {float(i) + 1, 1, 1}) : Box({5, 5, 5}, {5, 5, 5}));
   PrimitiveRefs mixed = make_references(boxes);
-  Bvh m = median_tree(mixed);
+  Bvh m = testing::median_tree(mixed);
   rep = hill_climb(m);
   EXPECT_TRUE(validate(m, mixed).ok());
   EXPECT_LE(rep.final_cost, rep.initial_cost);

@@ -4,11 +4,14 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
 #include <limits>
 #include <vector>
+
+#include "bvhopt/median_builder.h"
 
 namespace bvhopt::testing {
 
@@ -114,6 +117,10 @@ std::string tree_signature(const Bvh& bvh, const PrimitiveRefs& refs) {
   if (got.ref_indices != want.ref_indices) return ::testing::AssertionFailure() << "leaf slots differ";
   return ::testing::AssertionSuccess();
 }
+
+double relative_gap(double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-300); }
+
+Bvh median_tree(const PrimitiveRefs& refs) { return build_object_median(refs, MedianConfig{}); }
 
 std::string read_text(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);

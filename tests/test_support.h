@@ -50,6 +50,12 @@ std::string tree_signature(const Bvh& bvh, const PrimitiveRefs& refs);
 // bit) and the same leaf slots; else the first difference.
 ::testing::AssertionResult same_nodes(const Bvh& got, const Bvh& want);
 
+// |a - b| relative to |b|: how far a tracked cost is from the cost recomputed from scratch.
+double relative_gap(double a, double b);
+
+// The object-median tree of `refs`: a poor start that leaves the optimizers much to do.
+Bvh median_tree(const PrimitiveRefs& refs);
+
 // The whole contents of a file ("" when it cannot be read).
 std::string read_text(const std::filesystem::path& path);
 

@@ -335,7 +335,7 @@ Bvh depth_first_copy(const Bvh& tree) {
   return expected;
 }
 
-void expect_same_tree(const Bvh& got, const Bvh& want) {
+void expect_same_depth_first_tree(const Bvh& got, const Bvh& want) {
   ASSERT_EQ(got.root, 0u);
   ASSERT_EQ(got.nodes.size(), want.nodes.size());
   ASSERT_EQ(0, std::memcmp(got.nodes.data(), want.nodes.data(), want.nodes.size() * sizeof(BvhNode)));
@@ -384,7 +384,7 @@ TEST(Renumber, InPlaceEqualsACopyInDepthFirstOrder) {
     if (trial % 2 == 1) shuffled.nodes.push_back(BvhNode{});  // unreachable
     const Bvh expected = depth_first_copy(shuffled);
     shuffled.renumber_depth_first();
-    expect_same_tree(shuffled, expected);
+    expect_same_depth_first_tree(shuffled, expected);
     ASSERT_TRUE(validate(shuffled, refs).ok());
   }
 }
@@ -436,8 +436,8 @@ TEST(Renumber, OnlyATreeAlreadyInOrderIsLeftAsItIs) {
   {
     Bvh same = built;
     same.renumber_depth_first();
-    expect_same_tree(same, depth_first_copy(built));
-    expect_same_tree(same, built);
+    expect_same_depth_first_tree(same, depth_first_copy(built));
+    expect_same_depth_first_tree(same, built);
   }
   // Each variant is a tree over the same references, but not in order.
   std::vector<std::pair<const char*, Bvh>> variants;
@@ -479,7 +479,7 @@ TEST(Renumber, OnlyATreeAlreadyInOrderIsLeftAsItIs) {
     SCOPED_TRACE(name);
     const Bvh expected = depth_first_copy(t);
     t.renumber_depth_first();
-    expect_same_tree(t, expected);
+    expect_same_depth_first_tree(t, expected);
     ASSERT_TRUE(validate(t, refs).ok());
   }
 }

@@ -204,10 +204,6 @@ TEST(WideLayout, SameBytesOnAnyThreadCount) {
   }
 }
 
-std::string read_bytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
 
 uint64_t fnv1a(uint64_t h, const char* p, size_t n) {
   for (size_t i = 0; i < n; ++i) h = (h ^ uint8_t(p[i])) * 0x100000001B3ull;
@@ -248,7 +244,7 @@ TEST_F(ExportFile, FlatFileHoldsTheArenaBehindItsHeader) {
     const WideBvh wide(k.flat, k.mesh, o);
     const fs::path out = dir_ / "flat.wbvh";
     write_wide_export_file(out, wide, k.flat.nodes[0].box);
-    const std::string bytes = read_bytes(out);
+    const std::string bytes = testing::read_text(out);
     const WideExportHeader h = header_of(bytes);
     EXPECT_EQ(h.format, 1u);
     EXPECT_EQ(h.width, width);
@@ -272,7 +268,7 @@ TEST_F(ExportFile, CwbvhFileHoldsNodesAndTriangles) {
   const CompressedWideBvh c = build_compressed_wide_bvh(k.flat, k.mesh);
   const fs::path out = dir_ / "c.wbvh";
   write_cwbvh_export_file(out, c, k.flat.nodes[0].box, k.mesh.triangle_count());
-  const std::string bytes = read_bytes(out);
+  const std::string bytes = testing::read_text(out);
   const WideExportHeader h = header_of(bytes);
   EXPECT_EQ(h.format, 2u);
   EXPECT_EQ(h.width, 8u);
