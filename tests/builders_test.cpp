@@ -632,7 +632,10 @@ std::string canonical_tree(const Bvh& bvh, uint32_t n) {
     std::vector<uint32_t> ids(bvh.ref_indices.begin() + nd.first_ref(), bvh.ref_indices.begin() + nd.first_ref() + nd.ref_count());
     std::sort(ids.begin(), ids.end());
     std::string s;
-    for (uint32_t id : ids) s += (s.empty() ? "" : "+") + std::to_string(id);
+    for (uint32_t id : ids) {
+      if (!s.empty()) s += '+';
+      s += std::to_string(id);
+    }
     return s;
   }
   std::string a = canonical_tree(bvh, nd.left()), b = canonical_tree(bvh, nd.right());

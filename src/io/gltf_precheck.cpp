@@ -65,7 +65,14 @@ const Json* lookup(const Json& root, const char* collection, const Json& ref) {
   return nullptr;
 }
 
-std::string ref_text(const Json& ref) { return ref.is_string() ? "'" + ref.get<std::string>() + "'" : ref.dump(); }
+// Appended piece by piece: GCC 12 warns falsely (-Wrestrict) on "'" + str + "'" here.
+std::string ref_text(const Json& ref) {
+  if (!ref.is_string()) return ref.dump();
+  std::string quoted = "'";
+  quoted += ref.get<std::string>();
+  quoted += '\'';
+  return quoted;
+}
 
 // A non-negative integer field (absent: `fallback`); anything else is an error.
 uint64_t count_field(const Json& item, const char* field, uint64_t fallback, const std::string& what) {
