@@ -8,16 +8,15 @@
 
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 
 #include "bvhopt/atomic_file.h"
 #include "bvhopt/error.h"
+#include "test_support.h"
 
 namespace fs = std::filesystem;
 
 namespace bvhopt {
 namespace {
-
 
 class AtomicFile : public ::testing::Test {
  protected:
