@@ -22,6 +22,11 @@
 // (it needs only the tree), so its peak is tree + leaf slots + scratch. Heap figures count every
 // operator new of the process (this program replaces it); the process's peak RSS is printed too.
 //
+// Where the time goes: per scene, each stage of the optimizer (its passes, seconds and
+// seconds a pass; medians over the converged runs, which run the same passes), the setup
+// before them and the final renumbering after; and for the smallest and largest built-in
+// scenes, how much each stage grew from one to the other.
+//
 // Times are wall seconds of one run on a shared machine: the targets are ratios to the build
 // time measured in the same run, and the growth from the smallest to the largest built-in
 // scene is compared with n log n.
@@ -150,6 +155,19 @@ Options parse(int argc, char** argv) {
   return opt;
 }
 
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+}
+
+// One converged run's time, stage by stage (OptimizeReport::stages), and around them.
+struct Profile {
+  std::vector<double> stage_seconds;
+  double setup = 0, finish = 0;
+};
+
 double share_of_gain(double start, double reached, double converged) {
   return start > converged ? 100.0 * (start - reached) / (start - converged) : 100.0;
 }
@@ -165,13 +183,32 @@ struct Row {
   double reference = 0;  // 0: none given
   bool converged_run = true;
   std::vector<double> converged_runs_s;  // every converged run's seconds, the first included
+  std::vector<StageReport> stages;       // the first converged run's stages
+  std::vector<Profile> profiles;         // every converged run's, the first included
   Bvh sweep_tree;                        // kept for the repeated runs (--repeat)
 
-  double median_converged_s() const {
-    std::vector<double> v = converged_runs_s;
-    std::sort(v.begin(), v.end());
-    const size_t m = v.size() / 2;
-    return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+  double median_converged_s() const { return median(converged_runs_s); }
+  double median_stage_s(size_t k) const {
+    std::vector<double> v;
+    for (const Profile& p : profiles) v.push_back(p.stage_seconds[k]);
+    return median(v);
+  }
+  double median_setup_s() const {
+    std::vector<double> v;
+    for (const Profile& p : profiles) v.push_back(p.setup);
+    return median(v);
+  }
+  double median_finish_s() const {
+    std::vector<double> v;
+    for (const Profile& p : profiles) v.push_back(p.finish);
+    return median(v);
+  }
+  void add_profile(const OptimizeReport& rep) {
+    Profile p;
+    for (const StageReport& st : rep.stages) p.stage_seconds.push_back(st.seconds);
+    p.setup = rep.setup_seconds;
+    p.finish = rep.finish_seconds;
+    profiles.push_back(std::move(p));
   }
 };
 
@@ -186,6 +223,8 @@ double repeat_run(Row& row, const Options& opt) {
   if (opt.budget == 0.0 && rep.final_cost != row.converged)
     throw Error("scale_bench: a repeated run of " + row.spec + " ended at " + std::to_string(rep.final_cost) +
                 ", the first at " + std::to_string(row.converged));
+  // The same passes, so the same stages: their times line up with the first run's.
+  if (rep.stages.size() == row.stages.size()) row.add_profile(rep);
   return rep.seconds;
 }
 
@@ -243,10 +282,57 @@ Row run_scene(const std::string& spec, const Options& opt) {
   row.converged = rep.final_cost;
   row.converged_s = rep.seconds;
   row.converged_runs_s.push_back(rep.seconds);
+  row.stages = rep.stages;
+  row.add_profile(rep);
   row.passes = rep.passes;
   row.converged_run = rep.stop_reason == StopReason::converged;
   if (auto it = opt.references.find(spec); it != opt.references.end()) row.reference = it->second;
   return row;
+}
+
+// Where each run's time went, and (for the smallest and largest built-in scenes, when they
+// ran the same stages) how much each part grew from one to the other.
+void print_stages(const std::vector<Row>& rows, const Row* small, const Row* large) {
+  for (const Row& r : rows) {
+    const double total = r.median_converged_s();
+    std::printf("\n%s: where the time goes (%s; medians of %zu run%s)\n\n", r.spec.c_str(),
+                r.converged_run ? "converged" : "stopped at the budget", r.profiles.size(),
+                r.profiles.size() == 1 ? "" : "s");
+    std::printf("| stage | passes | s | ms a pass | share |\n|---|---|---|---|---|\n");
+    std::printf("| setup | | %.3f | | %.1f %% |\n", r.median_setup_s(), 100.0 * r.median_setup_s() / total);
+    for (size_t k = 0; k < r.stages.size(); ++k) {
+      const double sec = r.median_stage_s(k);
+      std::printf("| %zu %.*s | %u | %.3f | %.2f | %.1f %% |\n", k, static_cast<int>(r.stages[k].name.size()),
+                  r.stages[k].name.data(), r.stages[k].passes, sec,
+                  r.stages[k].passes ? 1e3 * sec / r.stages[k].passes : 0.0, 100.0 * sec / total);
+    }
+    std::printf("| finish (renumbering) | | %.3f | | %.1f %% |\n", r.median_finish_s(), 100.0 * r.median_finish_s() / total);
+  }
+  if (!small || !large || small == large || small->stages.size() != large->stages.size()) return;
+  for (size_t k = 0; k < small->stages.size(); ++k)
+    if (small->stages[k].name != large->stages[k].name) return;
+  const double n = static_cast<double>(large->triangles) / static_cast<double>(small->triangles);
+  const double nlogn = n * std::log(static_cast<double>(large->triangles)) / std::log(static_cast<double>(small->triangles));
+  std::printf("\ngrowth of each part, %llu -> %llu triangles (n log n x%.2f; medians)\n\n",
+              static_cast<unsigned long long>(small->triangles), static_cast<unsigned long long>(large->triangles), nlogn);
+  std::printf("| part | s | passes | s a pass | seconds beyond n log n at the larger size |\n|---|---|---|---|---|\n");
+  // What the part took at the larger size beyond the smaller's times n log n's growth: where
+  // the growth above n log n comes from (negative: below it).
+  const auto ratio = [](double from, double to) {
+    char text[32] = "";
+    if (from > 0) std::snprintf(text, sizeof text, "x%.2f", to / from);
+    return std::string(text);
+  };
+  const auto row = [&](const std::string& name, double a, double b, uint32_t pa, uint32_t pb) {
+    std::printf("| %s | %s | %s | %s | %+.3f |\n", name.c_str(), ratio(a, b).c_str(), ratio(pa, pb).c_str(),
+                pa && pb ? ratio(a / pa, b / pb).c_str() : "", b - nlogn * a);
+  };
+  row("setup", small->median_setup_s(), large->median_setup_s(), 0, 0);
+  for (size_t k = 0; k < small->stages.size(); ++k)
+    row(std::to_string(k) + " " + std::string(small->stages[k].name), small->median_stage_s(k), large->median_stage_s(k),
+        small->stages[k].passes, large->stages[k].passes);
+  row("finish (renumbering)", small->median_finish_s(), large->median_finish_s(), 0, 0);
+  row("whole run", small->median_converged_s(), large->median_converged_s(), small->passes, large->passes);
 }
 
 void print(const std::vector<Row>& rows, int threads) {
@@ -309,6 +395,17 @@ void print(const std::vector<Row>& rows, int threads) {
       for (double t : r.converged_runs_s) std::printf(" %.2f", t);
       std::printf(" s (median %.2f)\n", r.median_converged_s());
     }
+  print_stages(rows, small, large);
+}
+
+nlohmann::json stages_json(const Row& r) {
+  nlohmann::json stages = nlohmann::json::array();
+  for (size_t k = 0; k < r.stages.size(); ++k)
+    stages.push_back({{"name", std::string(r.stages[k].name)},
+                      {"passes", r.stages[k].passes},
+                      {"seconds_median", r.median_stage_s(k)},
+                      {"cost", r.stages[k].cost}});
+  return stages;
 }
 
 }  // namespace
@@ -358,6 +455,9 @@ int main(int argc, char** argv) {
                      {"converged_seconds_runs", r.converged_runs_s},
                      {"converged_seconds_median", r.median_converged_s()},
                      {"passes", r.passes},
+                     {"stages", stages_json(r)},
+                     {"setup_seconds_median", r.median_setup_s()},
+                     {"finish_seconds_median", r.median_finish_s()},
                      {"heap_bytes_per_triangle_build", r.build_bytes_per_tri},
                      {"heap_bytes_per_triangle_optimize", r.optimize_bytes_per_tri},
                      {"peak_rss_bytes_per_triangle", r.rss_bytes_per_tri}});

@@ -312,6 +312,7 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
                       {"stop_reason", std::string(stop_reason_name(s.report.stop_reason))},
                       {"insertion_form", s.insertion_form},
                       {"insertion_parallel_start", s.insertion_parallel_start},
+                      {"optimize_profile", stages_json(s.report)},
                       {"leaves", s.leaves}});
   }
   print_json({{"scene", opt.scene.spec},
@@ -332,6 +333,7 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
               {"stop_reason", std::string(stop_reason_name(best.report.stop_reason))},
               {"insertion_form", best.insertion_form},
               {"insertion_parallel_start", best.insertion_parallel_start},
+              {"optimize_profile", stages_json(best.report)},
               {"leaves", best.leaves},
               {"start_leaf_size", best.spec.leaf_size},
               {"start_spatial_max", best.spec.spatial_max},
@@ -356,6 +358,7 @@ void print_bake_summary(const BakeOptions& opt, const BakeResult& r) {
               << format_double(s.optimize_seconds, 2) << " s, " << s.report.passes << " passes ("
               << stop_reason_name(s.report.stop_reason) << "; budget "
               << (s.budget_seconds > 0 ? format_double(s.budget_seconds, 2) + " s" : std::string("none")) << ")\n"
+              << "  stages   " << stages_text(s.report) << "\n"
               << "collapse   cost " << format_double(s.cost_final, 4) << ", " << s.leaves << " leaves, "
               << format_double(s.collapse_seconds, 2) << " s\n";
   }

@@ -205,11 +205,12 @@ std::string trace_csv(const OptimizeReport& report) {
   std::ostringstream f;
   f.precision(10);
   // Columns are only ever added at the end, so that readers of older traces keep working.
-  f << "pass,cost,best_cost,temperature,moves,seconds,stage\n";
-  f << 0 << ',' << report.initial_cost << ',' << report.initial_cost << ",0,0,0,0\n";
+  f << "pass,cost,best_cost,temperature,moves,seconds,stage,stage_name\n";
+  // Row 0 is the tree before the first pass: no stage has run yet.
+  f << 0 << ',' << report.initial_cost << ',' << report.initial_cost << ",0,0,0,0,\n";
   for (const PassRecord& p : report.trace)
     f << p.pass << ',' << p.cost << ',' << p.best_cost << ',' << p.temperature << ',' << p.moves << ',' << p.seconds
-      << ',' << p.stage << '\n';
+      << ',' << p.stage << ',' << p.stage_name << '\n';
   return f.str();
 }
 
@@ -233,6 +234,7 @@ void print_report_json(const OptimizeOptions& opt, const Loaded& in, const BvhFi
                   {"stop_reason", std::string(stop_reason_name(report.stop_reason))},
                   {"cost_trace", opt.trace_path},
                   {"output", opt.output}};
+  j.update(stages_json(report));
   // Which insertion form ran: hybrid takes another on large trees.
   if (parse_optimizer_method(opt.method) == OptimizerMethod::insertion) {
     const InsertionForm form =
@@ -262,6 +264,7 @@ void print_summary(const OptimizeOptions& opt, const Loaded& in, const BvhFileIn
             << "passes     " << report.passes << " (" << stop_reason_name(report.stop_reason) << "), " << report.moves
             << " moves\n"
             << "time       " << format_double(report.seconds, 3) << " s\n"
+            << "stages     " << stages_text(report) << "\n"
             << "written    " << opt.output << " (" << info.method << ")\n";
   if (!opt.trace_path.empty()) std::cout << "cost trace " << opt.trace_path << "\n";
 }
@@ -338,7 +341,7 @@ void register_optimize_command(CLI::App& app) {
       ->type_name("S|Nx")
       ->excludes("--time-limit");
   cmd->add_option("--seed", opt->shared.seed, "Seed of every random choice")->check(whole_number(0, UINT64_MAX))->capture_default_str();
-  cmd->add_option("--cost-trace", opt->trace_path, "Write the cost after every pass as CSV (pass, cost, best_cost, temperature, moves, seconds, stage: the method's stage that ran the pass, from 0)")->type_name("FILE.csv");
+  cmd->add_option("--cost-trace", opt->trace_path, "Write the cost after every pass as CSV (pass, cost, best_cost, temperature, moves, seconds, stage: the method's stage that ran the pass, from 0, stage_name: its name)")->type_name("FILE.csv");
   opt->builder.add_to(cmd);
   opt->evh.add_to(cmd);
   opt->cost.add_to(cmd);

@@ -43,12 +43,32 @@ double GainEstimate::fraction() const {
 std::string progress_text(const PassRecord& p, const GainEstimate& gain, bool with_temperature) {
   std::ostringstream line;
   line << "pass " << p.pass;
+  if (!p.stage_name.empty()) line << "  " << p.stage_name;
   if (with_temperature) line << "  T " << format_double(p.temperature, 3);
   line << "  cost " << format_double(p.cost, 4) << "  best " << format_double(p.best_cost, 4);
   const double f = gain.fraction();
   line << "  gain " << (f < 0.0 ? std::string("?") : format_double(100.0 * f, 0)) << " %";
   line << "  " << format_double(p.seconds, 1) << " s";
   return line.str();
+}
+
+std::string stages_text(const OptimizeReport& report) {
+  std::ostringstream line;
+  for (size_t i = 0; i < report.stages.size(); ++i) {
+    const StageReport& st = report.stages[i];
+    line << (i ? ", " : "") << st.name << ' ' << st.passes << (st.passes == 1 ? " pass " : " passes ")
+         << format_double(st.seconds, 2) << " s -> " << format_double(st.cost, 4);
+  }
+  line << (report.stages.empty() ? "" : "; ") << "setup " << format_double(report.setup_seconds, 2) << " s, finish "
+       << format_double(report.finish_seconds, 2) << " s";
+  return line.str();
+}
+
+nlohmann::json stages_json(const OptimizeReport& report) {
+  nlohmann::json stages = nlohmann::json::array();
+  for (const StageReport& st : report.stages)
+    stages.push_back({{"name", std::string(st.name)}, {"passes", st.passes}, {"seconds", st.seconds}, {"cost", st.cost}});
+  return {{"stages", stages}, {"setup_seconds", report.setup_seconds}, {"finish_seconds", report.finish_seconds}};
 }
 
 }  // namespace bvhopt::cli

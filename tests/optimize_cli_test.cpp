@@ -65,8 +65,19 @@ TEST_F(OptimizeCli, SceneToAnnealedFileWithTraceAndJson) {
 
   std::vector<std::string> rows = lines(testing::read_text(csv));
   ASSERT_FALSE(rows.empty());
-  EXPECT_EQ(rows[0], "pass,cost,best_cost,temperature,moves,seconds,stage");
+  // Columns only ever added at the end: the first seven as they always were.
+  EXPECT_EQ(rows[0], "pass,cost,best_cost,temperature,moves,seconds,stage,stage_name");
   EXPECT_EQ(rows.size(), j["passes"].get<size_t>() + 2);  // header, pass 0 (the input), every pass
+  EXPECT_EQ(rows[1].substr(rows[1].size() - 3), ",0,");     // the input: no stage ran yet
+  for (size_t i = 2; i < rows.size(); ++i) EXPECT_EQ(rows[i].substr(rows[i].size() - 9), ",0,anneal") << rows[i];
+  // One stage, named after the method, with every pass; the seconds add up to the run's.
+  ASSERT_EQ(j["stages"].size(), 1u);
+  EXPECT_EQ(j["stages"][0]["name"], "anneal");
+  EXPECT_EQ(j["stages"][0]["passes"], j["passes"]);
+  EXPECT_EQ(j["stages"][0]["cost"], j["cost_after"]);
+  EXPECT_NEAR(j["setup_seconds"].get<double>() + j["stages"][0]["seconds"].get<double>() +
+                  j["finish_seconds"].get<double>(),
+              j["seconds"].get<double>(), 1e-9);
 }
 
 TEST_F(OptimizeCli, BvhFileInputHillClimbAndPassLimit) {
@@ -155,6 +166,18 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
   // with spatial splits only in nodes of at most 256 references, and keeps the cheapest
   // tree: the reported cost, start and file are that start's.
   ASSERT_EQ(j["starts"].size(), 3u);
+  // Each start's optimizer profile: its stages hold every pass, the last ending at the start's
+  // optimized cost.
+  for (const nlohmann::json& s : j["starts"]) {
+    const nlohmann::json& stages = s["optimize_profile"]["stages"];
+    ASSERT_FALSE(stages.empty());
+    uint32_t passes = 0;
+    for (const nlohmann::json& st : stages) passes += st["passes"].get<uint32_t>();
+    EXPECT_EQ(passes, s["passes"].get<uint32_t>());
+    // The optimizer's tracked sum against the file's cost recomputed from scratch.
+    EXPECT_NEAR(stages.back()["cost"].get<double>(), s["cost_optimized"].get<double>(),
+                1e-9 * s["cost_optimized"].get<double>());
+  }
   EXPECT_EQ(j["starts"][0]["leaf_size"], 1);
   EXPECT_EQ(j["starts"][1]["leaf_size"], 8);
   EXPECT_EQ(j["starts"][2]["leaf_size"], 8);

@@ -9,7 +9,9 @@
 #include <chrono>
 #include <cmath>
 #include <functional>
+#include <map>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -125,6 +127,58 @@ std::vector<std::pair<std::string, Runner>> every_optimizer() {
       return optimize_insertion(b, c);
     });
   return all;
+}
+
+// The report's stages, as a profile must be: every pass in the stage its record names, the
+// stages in the order each method runs them, each ending at the cost of the tree it left,
+// and the seconds before, in and after them adding up to the run's.
+TEST(OptimizerDriver, StagesAccountForEveryPassAndSecond) {
+  PrimitiveRefs refs = testing::random_refs(1500, 26);
+  const Bvh start = build_spatial_median(refs);
+  const std::map<std::string, std::vector<std::string_view>> expected = {
+      {"hill-climb", {"hill-climb"}},
+      {"anneal", {"anneal"}},
+      {"sequential", {"sequential"}},
+      {"parallel", {"parallel"}},
+      {"hybrid", {"sequential", "parallel", "sweeps"}},
+      {"regional", {"parallel", "sequential", "sweeps", "regional", "sweeps", "parallel", "sweeps"}}};
+  for (const auto& [name, optimize] : every_optimizer()) {
+    Bvh bvh = start;
+    const OptimizeReport r = optimize(bvh, OptimizeLimits{});
+    ASSERT_EQ(r.stop_reason, StopReason::converged) << name;
+    std::vector<std::string_view> names;
+    for (const StageReport& st : r.stages) names.push_back(st.name);
+    EXPECT_EQ(names, expected.at(name)) << name;
+    std::vector<uint32_t> passes(r.stages.size(), 0);
+    for (const PassRecord& p : r.trace) {
+      ASSERT_LT(p.stage, r.stages.size()) << name << " pass " << p.pass;
+      EXPECT_EQ(p.stage_name, r.stages[p.stage].name) << name << " pass " << p.pass;
+      ++passes[p.stage];
+    }
+    double seconds = r.setup_seconds + r.finish_seconds;
+    for (size_t k = 0; k < r.stages.size(); ++k) {
+      EXPECT_EQ(r.stages[k].passes, passes[k]) << name << " stage " << k;
+      EXPECT_GE(r.stages[k].seconds, 0.0) << name << " stage " << k;
+      seconds += r.stages[k].seconds;
+    }
+    EXPECT_GE(r.setup_seconds, 0.0) << name;
+    EXPECT_GE(r.finish_seconds, 0.0) << name;
+    EXPECT_NEAR(seconds, r.seconds, 1e-9) << name;
+    ASSERT_FALSE(r.stages.empty()) << name;
+    EXPECT_EQ(r.stages.back().cost, r.final_cost) << name;
+    // Every insertion stage leaves a tree no dearer than the cheapest it saw at a pass's end
+    // or was handed on; cheaper where its undo log filled up mid-pass on a tree cheaper
+    // still (stay_within_log keeps that one).
+    if (name == "hill-climb" || name == "anneal") continue;
+    double stage_start = r.initial_cost;
+    for (size_t k = 0; k < r.stages.size(); ++k) {
+      double least = stage_start;
+      for (const PassRecord& p : r.trace)
+        if (p.stage == k) least = std::min(least, p.cost);
+      EXPECT_LE(r.stages[k].cost, least) << name << " stage " << k;
+      stage_start = r.stages[k].cost;
+    }
+  }
 }
 
 TEST(OptimizerDriver, StopReasons) {
@@ -249,6 +303,9 @@ TEST(OptimizerDriver, BudgetStoppedInsertionEndsWithRotationSweeps) {
     const auto closing = std::count_if(r.trace.begin(), r.trace.end(), [](const PassRecord& p) { return p.stage == 1; });
     if (rotations) {
       EXPECT_GE(closing, 1) << "no sweep after the stage the budget stopped";
+      ASSERT_EQ(r.stages.size(), 2u);
+      EXPECT_EQ(r.stages[0].name, "sequential");
+      EXPECT_EQ(r.stages[1].name, "sweeps");
       EXPECT_LE(r.trace.back().seconds, kBudget);
       // Sweeps never raise the cost.
       EXPECT_LE(r.trace.back().cost, r.trace[1].best_cost);

@@ -17,9 +17,21 @@ struct PassRecord {
   uint64_t moves = 0;        // moves applied in this pass
   double seconds = 0.0;      // elapsed since the optimizer started
   // Which stage of the method ran the pass, from 0: insertion's forms run several in turn
-  // (hybrid: sequential, then parallel; regional: parallel and sequential by the measure,
-  // regional, parallel); the other methods have one.
+  // (OptimizeReport::stages names them); the other methods have one.
   uint32_t stage = 0;
+  // That stage's name, as in OptimizeReport::stages (a string with static storage).
+  std::string_view stage_name;
+};
+
+// One stage of a run, in the order the stages ran: where the time went. Insertion's forms
+// run several ("sequential", "parallel", "regional" passes and "sweeps" of rotations; the
+// regional form of a large tree: parallel, sequential, sweeps, regional, sweeps, parallel,
+// sweeps); hill climbing and annealing run one ("hill-climb", "anneal").
+struct StageReport {
+  std::string_view name;  // static storage
+  uint32_t passes = 0;
+  double seconds = 0.0;   // from the last stage's end (the first: its start) to the end of its last pass
+  double cost = 0.0;      // the tree's cost when the stage ended (its best tree, if it kept one)
 };
 
 // Why an optimizer stopped.
@@ -43,6 +55,13 @@ struct OptimizeReport {
   double seconds = 0.0;
   StopReason stop_reason = StopReason::converged;
   std::vector<PassRecord> trace;
+  std::vector<StageReport> stages;
+  // The seconds before the first stage (insertion: numbering and refitting the tree, the
+  // first stage's scan of it) and after the last (insertion: the final renumbering); with the
+  // stages' seconds they add up to `seconds`. A run without stages (nothing to optimize)
+  // spent all of it setting up.
+  double setup_seconds = 0.0;
+  double finish_seconds = 0.0;
 };
 
 // Called after every pass, from the calling thread; the command line draws its progress

@@ -169,6 +169,25 @@ void register_optimize(py::class_<Tree>& tree) {
                              "Seconds since the start at the end of each pass")
       .def_property_readonly("pass_stage", [](const Report& r) { return per_pass(r, [](const PassRecord& p) { return p.stage; }); },
                              "The method's stage that ran each pass, from 0 (insertion's forms run several in turn)")
+      .def_property_readonly(
+          "stages",
+          [](const Report& r) {
+            py::list out;
+            for (const StageReport& st : r.report.stages) {
+              py::dict d;
+              d["name"] = std::string(st.name);
+              d["passes"] = st.passes;
+              d["seconds"] = st.seconds;
+              d["cost"] = st.cost;
+              out.append(d);
+            }
+            return out;
+          },
+          "Where the time went: one dict per stage, in the order they ran (name, passes, seconds, cost at its end)")
+      .def_property_readonly("setup_seconds", [](const Report& r) { return r.report.setup_seconds; },
+                             "Seconds before the first stage")
+      .def_property_readonly("finish_seconds", [](const Report& r) { return r.report.finish_seconds; },
+                             "Seconds after the last stage (insertion: the final renumbering)")
       .def("__repr__", [](const Report& r) {
         return "<OptimizeReport " + r.method + ": cost " + std::to_string(r.report.initial_cost) + " -> " +
                std::to_string(r.report.final_cost) + " in " + std::to_string(r.report.passes) + " passes (" +

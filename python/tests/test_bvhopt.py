@@ -82,6 +82,12 @@ def test_optimize_equals_the_command_line(cli, tmp_path, scene, method, args):
     assert report.pass_stage[-1] == ((1 if args else 2) if method == "insertion" else 0)
     if method == "insertion":
         assert ref["insertion_rotations"] == (not args)
+    # The stages the command line reports, by name and passes; their passes are the trace's.
+    assert [(s["name"], s["passes"]) for s in report.stages] == [(s["name"], s["passes"]) for s in ref["stages"]]
+    assert [s["passes"] for s in report.stages] == np.bincount(report.pass_stage.astype(np.int64)).tolist()
+    assert report.stages[-1]["cost"] == report.final_cost
+    expected = {"insertion": ["sequential", "parallel"] + ([] if args else ["sweeps"])}.get(method, [method])
+    assert [s["name"] for s in report.stages] == expected
     bvh.validate()
     bvh.save(tmp_path / "b.bvh")
     np.testing.assert_array_equal(bvhopt.load(tmp_path / "a.bvh").nodes, bvhopt.load(tmp_path / "b.bvh").nodes)

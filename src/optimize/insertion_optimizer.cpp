@@ -899,6 +899,17 @@ class InsertionOptimizer {
   double leaf_cost(double area, uint32_t count) const { return config_.cost.intersection * area * count; }
 };
 
+// A stage's name in the report: what its passes do.
+std::string_view stage_name(const Stage& st) {
+  switch (st.kind) {
+    case PassKind::sequential: return "sequential";
+    case PassKind::regional: return "regional";
+    case PassKind::parallel: return "parallel";
+    case PassKind::rotation: return "sweeps";
+  }
+  return "sequential";
+}
+
 // A stage of sweeps of rotations, until one gains less than a hand-over's 0.03 %.
 Stage sweep_stage() { return {PassKind::rotation, true, 1}; }
 
@@ -1034,7 +1045,7 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
     for (; k < stages.size(); ++k) {
       if (k > 0) stage.emplace(bvh, config, stages[k], after_move, from_root);
       reserve_for(stages[k]);
-      driver.run(*stage);
+      driver.run(*stage, stage_name(stages[k]));
       if (driver.stop_reason() != StopReason::converged) break;
     }
     if (closing_sweeps && k < stages.size() && stages[k].kind != PassKind::rotation &&
@@ -1042,7 +1053,7 @@ OptimizeReport run_insertion(Bvh& bvh, const InsertionConfig& config, const test
       driver.expect_first_pass(sweep_seconds);
       stage.emplace(bvh, config, sweep_stage(), after_move, from_root);
       reserve_for(sweep_stage());
-      driver.run(*stage);
+      driver.run(*stage, stage_name(sweep_stage()));
       // A sweep that gains too little ends the stage; the run stopped for its budget.
       if (driver.stop_reason() == StopReason::converged) driver.stop(StopReason::time_limit);
     }

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cstdint>
 #include <optional>
+#include <string_view>
 #include <utility>
 
 #include "bvhopt/cost.h"
@@ -54,8 +55,15 @@ class PassDriver {
   //   PassResult run_pass(uint32_t pass, double stage_best)
   // Passes are numbered from 0 over the whole run; stage_best is the lowest cost of this
   // stage before the pass (its starting cost included).
+  // `name` (static storage) names the stage in the report.
   template <class Work>
-  void run(Work& work) {
+  void run(Work& work, std::string_view name) {
+    // A later stage's time runs from the last one's end, so that it counts its own start
+    // (insertion: the new stage's scan of the tree) and the stages add up to the run.
+    const double stage_begin = report_.stages.empty() ? elapsed() : stage_end_;
+    if (report_.stages.empty()) report_.setup_seconds = stage_begin;
+    const uint32_t passes_before = report_.passes;
+    stage_name_ = name;
     double stage_best = work.cost();
     bool current_is_best = true;
     // Valid only while it holds the tree of cost stage_best. Taken lazily, just before a pass
@@ -114,12 +122,19 @@ class PassDriver {
     if (!current_is_best && best_tree) work.restore(std::move(*best_tree));
     report_.final_cost = work.cost();
     check_finite_cost(report_.final_cost, "optimize");
+    stage_end_ = elapsed();
+    report_.stages.push_back({name, report_.passes - passes_before, stage_end_ - stage_begin, report_.final_cost});
     ++stage_;
   }
 
   // After the last stage (or instead of any): the report, with the total time.
   OptimizeReport finish() {
     report_.seconds = elapsed();
+    // A run without stages (nothing to optimize) spent its time setting up.
+    if (report_.stages.empty())
+      report_.setup_seconds = report_.seconds;
+    else
+      report_.finish_seconds = report_.seconds - stage_end_;
     return std::move(report_);
   }
   StopReason stop_reason() const { return report_.stop_reason; }
@@ -140,6 +155,7 @@ class PassDriver {
     rec.moves = r.moves;
     rec.seconds = elapsed();
     rec.stage = stage_;
+    rec.stage_name = stage_name_;
     report_.trace.push_back(rec);
     report_.moves += r.moves;
     if (limits_.on_pass) {
@@ -171,6 +187,8 @@ class PassDriver {
   double first_pass_estimate_ = 0.0;  // the next stage's first pass, if the method told
   double last_callback_seconds_ = 0.0;  // the last pass's on_pass
   uint32_t stage_ = 0;  // run() calls finished: the stage the next records belong to
+  std::string_view stage_name_;  // its name
+  double stage_end_ = 0.0;       // when the last stage ended
 };
 
 }  // namespace bvhopt::detail

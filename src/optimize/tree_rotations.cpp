@@ -177,7 +177,8 @@ class RotationPasses {
   bool settled_ = false;  // the last pass was cold and applied no move
 };
 
-OptimizeReport run(Bvh& bvh, const OptimizerConfig& config, const Schedule& schedule) {
+// `name`: the method, which names its one stage in the report.
+OptimizeReport run(Bvh& bvh, const OptimizerConfig& config, const Schedule& schedule, std::string_view name) {
   detail::PassDriver driver(config.limits);
   driver.set_initial_cost(sah_cost(bvh, config.cost));
   // Nothing to rotate, or a tree of zero area where every move changes nothing.
@@ -185,7 +186,7 @@ OptimizeReport run(Bvh& bvh, const OptimizerConfig& config, const Schedule& sche
   detail::RotationEngine engine(bvh, config.cost);
   driver.set_initial_cost(engine.tree_cost());
   RotationPasses passes(engine, schedule);
-  driver.run(passes);
+  driver.run(passes, name);
   engine.write_to(bvh);
   return driver.finish();
 }
@@ -193,7 +194,7 @@ OptimizeReport run(Bvh& bvh, const OptimizerConfig& config, const Schedule& sche
 }  // namespace
 
 OptimizeReport hill_climb(Bvh& bvh, const HillClimbConfig& config) {
-  return run(bvh, config, Schedule{});
+  return run(bvh, config, Schedule{}, "hill-climb");
 }
 
 OptimizeReport anneal(Bvh& bvh, const AnnealConfig& config) {
@@ -204,7 +205,7 @@ OptimizeReport anneal(Bvh& bvh, const AnnealConfig& config) {
   s.energy_scale = config.energy_scale;
   s.seed = config.seed;
   s.keep_best = config.keep_best;
-  return run(bvh, config, s);
+  return run(bvh, config, s, "anneal");
 }
 
 }  // namespace bvhopt
