@@ -336,6 +336,14 @@ TEST(OptimizerDriver, LimitsMetAtAStageBoundary) {
     EXPECT_EQ(h.stop_reason, reason) << what;
     EXPECT_EQ(h.passes, s.passes) << what;
     EXPECT_EQ(testing::tree_signature(hyb, refs), testing::tree_signature(seq, refs)) << what;
+    // The parallel stage was set up but made no pass: listed with none.
+    EXPECT_EQ(h.stages.size(), 2u) << what;
+    if (h.stages.size() == 2) {
+      EXPECT_EQ(h.stages[0].passes, s.passes) << what;
+      EXPECT_EQ(h.stages[1].name, "parallel") << what;
+      EXPECT_EQ(h.stages[1].passes, 0u) << what;
+      EXPECT_EQ(h.stages[1].cost, h.final_cost) << what;
+    }
     return true;
   };
   InsertionConfig by_passes = insertion_of(InsertionForm::hybrid);

@@ -26,7 +26,8 @@ struct PassRecord {
 // One stage of a run, in the order the stages ran: where the time went. Insertion's forms
 // run several ("sequential", "parallel", "regional" passes and "sweeps" of rotations; the
 // regional form of a large tree: parallel, sequential, sweeps, regional, sweeps, parallel,
-// sweeps); hill climbing and annealing run one ("hill-climb", "anneal").
+// sweeps); hill climbing and annealing run one ("hill-climb", "anneal"). A stage that a
+// limit stopped before its first pass is listed with no passes: it was set up, not run.
 struct StageReport {
   std::string_view name;  // static storage
   uint32_t passes = 0;
