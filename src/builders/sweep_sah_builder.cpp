@@ -17,6 +17,7 @@
 #include "builders/sah_common.h"
 #include "builders/sorted_range_sweep.h"
 #include "builders/top_down.h"
+#include "tree/huge_pages.h"
 
 namespace bvhopt {
 namespace {
@@ -53,6 +54,7 @@ class SweepHeuristic {
   SweepHeuristic(const Mesh& mesh, const SweepSahConfig& config, Bvh& bvh)
     requires(kInPlace)
       : mesh_(&mesh), config_(config), bvh_(bvh), n_(mesh.triangle_count()) {
+    detail::reserve_on_huge_pages(bvh_.nodes, 2 * n_ - 1);
     bvh_.nodes.assign(2 * n_ - 1, BvhNode{});
     std::byte* end = reinterpret_cast<std::byte*>(bvh_.nodes.data() + bvh_.nodes.size());
     Box* boxes = reinterpret_cast<Box*>(end - n_ * sizeof(Box));
@@ -77,20 +79,25 @@ class SweepHeuristic {
     // already its references. Without leaves in place, nodes are allocated after the
     // presort so that the sort's temporary keys and the nodes are never held together
     // (peak memory); with them, the nodes hold the boxes and come first.
+    detail::reserve_on_huge_pages(bvh_.ref_indices, n_);
     bvh_.ref_indices.resize(n_);
     lists_[0] = bvh_.ref_indices.data();
     for (int a = 1; a < 3; ++a) {
       owned_lists_[a - 1].reset(new uint32_t[n_]);
+      detail::advise_huge_pages(owned_lists_[a - 1].get(), n_ * sizeof(uint32_t));
       lists_[a] = owned_lists_[a - 1].get();
     }
     presort();
     if constexpr (!kInPlace) {
+      detail::reserve_on_huge_pages(bvh_.nodes, 2 * n_ - 1);
       bvh_.nodes.assign(2 * n_ - 1, BvhNode{});
       root_box_ = detail::parallel_bounds(refs_->boxes.data(), n_);
     }
     bvh_.root = 0;
     is_left_.reset(new uint8_t[n_]);
+    detail::advise_huge_pages(is_left_.get(), n_);
     scratch_.reset(new Scratch[n_]);
+    detail::advise_huge_pages(scratch_.get(), n_ * sizeof(Scratch));
 
     detail::TopDownTree tree(bvh_);
     if constexpr (kInPlace) tree.place_leaves_in_place([this](uint32_t t) { return mesh_->triangle(t).bounds(); });
@@ -139,6 +146,7 @@ class SweepHeuristic {
   void presort() {
     // One key array reused for the three axes keeps the extra memory at 8 bytes per ref.
     std::unique_ptr<uint64_t[]> keys(new uint64_t[n_]);
+    detail::advise_huge_pages(keys.get(), n_ * sizeof(uint64_t));
     for (int a = 0; a < 3; ++a) {
       tbb::parallel_for(tbb::blocked_range<size_t>(0, n_, 16384), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i < r.end(); ++i)

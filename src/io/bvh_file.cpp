@@ -19,6 +19,7 @@
 #include "bvhopt/atomic_file.h"
 #include "bvhopt/testing/bvh_file_checksum.h"
 #include "io/regular_file.h"
+#include "tree/huge_pages.h"
 
 // The layout is described byte for byte in docs/file-format.md; keep the two in step.
 
@@ -427,6 +428,7 @@ void read_in_chunks(Reader& in, std::vector<unsigned char>& chunk, uint64_t coun
 // flipped byte is reported as corruption rather than as whatever it broke.
 void read_records(Reader& in, const std::string& name, const Header& h, Bvh& bvh, PrimitiveRefs& refs) {
   std::vector<unsigned char> chunk(kIoChunk);
+  detail::reserve_on_huge_pages(bvh.nodes, h.node_count);
   bvh.nodes.resize(h.node_count);
   read_in_chunks(in, chunk, h.node_count, kNodeRecord, [&](uint64_t i, const unsigned char* p) {
     BvhNode& nd = bvh.nodes[i];
@@ -434,6 +436,7 @@ void read_records(Reader& in, const std::string& name, const Header& h, Bvh& bvh
     nd.left_or_first = load<uint32_t>(p + 24);
     nd.right_or_count = load<uint32_t>(p + 28);
   });
+  detail::reserve_on_huge_pages(bvh.ref_indices, h.slot_count);
   bvh.ref_indices.resize(h.slot_count);
   read_in_chunks(in, chunk, h.slot_count, kSlotRecord,
                  [&](uint64_t i, const unsigned char* p) { bvh.ref_indices[i] = load<uint32_t>(p); });

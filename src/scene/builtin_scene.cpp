@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "bvhopt/scene.h"
+#include "tree/huge_pages.h"
 
 namespace bvhopt {
 
@@ -533,8 +534,8 @@ Mesh make_builtin_scene(const BuiltinSceneConfig& config) {
   Generator(config, counter).run();
   Mesh mesh;
   mesh.name = "builtin:atrium";
-  mesh.positions.reserve(3 * counter.vertices());
-  mesh.indices.reserve(3 * counter.triangles());
+  detail::reserve_on_huge_pages(mesh.positions, 3 * counter.vertices());
+  detail::reserve_on_huge_pages(mesh.indices, 3 * counter.triangles());
   Emitter writer(&mesh);
   Generator(config, writer).run();
   return mesh;
