@@ -13,6 +13,7 @@
 #include "builders/sah_common.h"
 #include "builders/sorted_range_sweep.h"
 #include "builders/top_down.h"
+#include "tree/huge_pages.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -266,10 +267,13 @@ class BinnedHeuristic {
       : refs_(refs), config_(config), bvh_(bvh), n_(refs.size()) {}
 
   void run() {
+    detail::reserve_on_huge_pages(bvh_.nodes, 2 * n_ - 1);
     bvh_.nodes.assign(2 * n_ - 1, BvhNode{});
+    detail::reserve_on_huge_pages(bvh_.ref_indices, n_);
     bvh_.ref_indices.resize(n_);
     bvh_.root = 0;
     work_.reset(new BinRef[n_]);
+    detail::advise_huge_pages(work_.get(), n_ * sizeof(BinRef));
     BinRef* work = work_.get();
     Node root = tbb::parallel_reduce(
         tbb::blocked_range<size_t>(0, n_, 16384), Node{},
