@@ -188,21 +188,16 @@ struct Row {
   Bvh sweep_tree;                        // kept for the repeated runs (--repeat)
 
   double median_converged_s() const { return median(converged_runs_s); }
-  double median_stage_s(size_t k) const {
+  // The median over the converged runs of one figure of their profiles.
+  template <class Field>
+  double median_of(const Field& field) const {
     std::vector<double> v;
-    for (const Profile& p : profiles) v.push_back(p.stage_seconds[k]);
+    for (const Profile& p : profiles) v.push_back(field(p));
     return median(v);
   }
-  double median_setup_s() const {
-    std::vector<double> v;
-    for (const Profile& p : profiles) v.push_back(p.setup);
-    return median(v);
-  }
-  double median_finish_s() const {
-    std::vector<double> v;
-    for (const Profile& p : profiles) v.push_back(p.finish);
-    return median(v);
-  }
+  double median_stage_s(size_t k) const { return median_of([k](const Profile& p) { return p.stage_seconds[k]; }); }
+  double median_setup_s() const { return median_of([](const Profile& p) { return p.setup; }); }
+  double median_finish_s() const { return median_of([](const Profile& p) { return p.finish; }); }
   void add_profile(const OptimizeReport& rep) {
     Profile p;
     for (const StageReport& st : rep.stages) p.stage_seconds.push_back(st.seconds);

@@ -1,6 +1,5 @@
 // The wide layout: collapsed nodes written depth-first into one aligned arena, each node
 // followed by its leaf blocks, so a node and the triangles it points to share pages.
-#include <sys/mman.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -17,6 +16,7 @@
 #include "bvhopt/error.h"
 #include "bvhopt/wide_bvh.h"
 #include "layout/box_padding.h"
+#include "tree/huge_pages.h"
 
 namespace bvhopt {
 
@@ -42,18 +42,15 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 // took 3.2 ms against 0.35). It costs at most 2 MiB of memory, under half the block. Not
 // cleared: the writers fill every byte, so the pages are first touched by the threads that
 // write them.
-constexpr size_t kHugePage = size_t(2) << 20;
+constexpr size_t kHugePage = detail::kHugePageBytes;
 
 std::unique_ptr<std::byte[], WideBvh::FreeArena> allocate_arena(size_t bytes) {
-  constexpr size_t kHuge = kHugePage;
-  const bool huge = bytes >= kHuge;
-  const size_t size = huge ? (bytes + kHuge - 1) / kHuge * kHuge : std::max<size_t>(bytes, 64);
+  const bool huge = bytes >= kHugePage;
+  const size_t size = huge ? (bytes + kHugePage - 1) / kHugePage * kHugePage : std::max<size_t>(bytes, 64);
   void* p = nullptr;
-  if (posix_memalign(&p, huge ? kHuge : 64, size) != 0)
+  if (posix_memalign(&p, huge ? kHugePage : 64, size) != 0)
     throw Error("wide layout: out of memory for " + std::to_string(bytes) + " bytes");
-#ifdef MADV_HUGEPAGE
-  if (huge) madvise(p, size, MADV_HUGEPAGE);
-#endif
+  if (huge) detail::advise_huge_pages(p, size);
   return std::unique_ptr<std::byte[], WideBvh::FreeArena>(static_cast<std::byte*>(p));
 }
 
