@@ -25,6 +25,7 @@
 
 #include "bvhopt/error.h"
 #include "bvhopt/optimize_report.h"
+#include "bvhopt/scene.h"
 
 namespace bvhopt::bench {
 
@@ -121,12 +122,22 @@ inline bool read_scene_option(Args& args, SceneOptions& s) {
   return true;
 }
 
+// Throws, naming the first file that is missing, before a run starts: a bench loads its
+// scenes in turn, and a wrong path found after the large scenes' runs wastes them.
+inline void require_scene_files(const std::vector<std::string>& specs) {
+  for (const std::string& spec : specs)
+    if (!is_builtin_scene_spec(spec) && !std::filesystem::is_regular_file(spec))
+      throw Error(spec + ": scene file not found (the shared scenes are read from $BVHOPT_SCENES, by default "
+                         "../shared/scenes from the working directory; --scene takes a path)");
+}
+
 // The scenes to run, in order: the --scene picks, or else every scene of the folder; then
 // the built-in scene if enabled. A missing folder is an error, unless `warn_as` names the
 // program: then it is a warning on stderr and the run goes on (insertion_bench still runs
 // the built-in scene without the shared folder).
 inline std::vector<std::string> scene_specs(const SceneOptions& s, const char* warn_as = nullptr) {
   std::vector<std::string> specs = s.files;
+  require_scene_files(specs);
   if (specs.empty()) {
     try {
       specs = list_scene_files(s.dir);

@@ -414,6 +414,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   return guarded_main("scale_bench", [&] {
+    require_scene_files(opt.scenes);
     ThreadLimit limit(opt.threads);
     std::vector<Row> rows;
     for (const std::string& spec : opt.scenes) {
