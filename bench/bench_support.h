@@ -132,7 +132,8 @@ inline void require_scene_files(const std::vector<std::string>& specs) {
 }
 
 // The scenes to run, in order: the --scene picks, or else every scene of the folder; then
-// the built-in scene if enabled. A missing folder is an error, unless `warn_as` names the
+// the built-in scene if enabled. A pick that is not a file is an error, before anything
+// runs (require_scene_files). A missing folder is an error, unless `warn_as` names the
 // program: then it is a warning on stderr and the run goes on (insertion_bench still runs
 // the built-in scene without the shared folder).
 inline std::vector<std::string> scene_specs(const SceneOptions& s, const char* warn_as = nullptr) {
