@@ -7,6 +7,8 @@
 #include <fstream>
 #include <string>
 
+#include <unistd.h>
+
 #include "../bench/bench_support.h"
 #include "bvhopt/error.h"
 
@@ -18,8 +20,11 @@ namespace fs = std::filesystem;
 class BenchScenes : public ::testing::Test {
  protected:
   void SetUp() override {
+    // Named after the test and the process, as ProgramTest's folders are: two suites run at
+    // once (Release and a sanitizer build) never share one.
     dir_ = fs::temp_directory_path() /
-           ("bvhopt_bench_scenes_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+           ("bvhopt_bench_scenes_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) +
+            "_" + std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
     std::ofstream(dir_ / "one.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
