@@ -121,7 +121,7 @@ Options parse(int argc, char** argv) {
       for (auto& b : split_list(args.value())) {
         auto k = parse_builder(b);
         if (!k || *k == BuilderKind::spatial_split)
-          throw Error("build_bench: unknown builder '" + b +
+          throw Error("unknown builder '" + b +
                       "' (sweep, binned, spatial-median, object-median; sbvh has its own bench: sbvh_bench)");
         o.builders.push_back(*k);
       }
@@ -131,7 +131,7 @@ Options parse(int argc, char** argv) {
                    "            [--json FILE]\n";
       std::exit(0);
     } else {
-      throw Error("build_bench: unknown option '" + a + "' (try --help)");
+      throw Error("unknown option '" + a + "' (try --help)");
     }
   }
   return o;
@@ -360,5 +360,5 @@ int run(int argc, char** argv) {
 }  // namespace bvhopt
 
 int main(int argc, char** argv) {
-  return bvhopt::bench::guarded_main("error", [&] { return bvhopt::run(argc, argv); });
+  return bvhopt::bench::guarded_main("build_bench", [&] { return bvhopt::run(argc, argv); });
 }

@@ -88,7 +88,7 @@ Options parse(int argc, char** argv) {
                    "          [--no-fig4] [--no-fig5] [--no-table]\n";
       std::exit(0);
     } else {
-      throw Error("evh_bench: unknown option '" + a + "'");
+      throw Error("unknown option '" + a + "'");
     }
   }
   if (o.quick) {

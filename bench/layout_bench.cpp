@@ -65,7 +65,7 @@ Options parse(int argc, char** argv) {
                    "             [--leaf N] [--json FILE]\n";
       std::exit(0);
     } else {
-      throw Error("layout_bench: unknown option '" + a + "'");
+      throw Error("unknown option '" + a + "'");
     }
   }
   o.scenes = scene_specs(o.scene_options);

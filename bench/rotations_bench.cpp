@@ -74,7 +74,7 @@ Options parse(int argc, char** argv) {
                    "                [--no-anneal] [--no-nonzero-variant] [--json FILE]\n";
       std::exit(0);
     } else {
-      throw Error("rotations_bench: unknown option '" + a + "' (try --help)");
+      throw Error("unknown option '" + a + "' (try --help)");
     }
   }
   return o;

@@ -216,7 +216,7 @@ double repeat_run(Row& row, const Options& opt) {
   cfg.limits.time_limit = opt.budget * row.build_s;
   const OptimizeReport rep = optimize_insertion(copy, cfg);
   if (opt.budget == 0.0 && rep.final_cost != row.converged)
-    throw Error("scale_bench: a repeated run of " + row.spec + " ended at " + std::to_string(rep.final_cost) +
+    throw Error("a repeated run of " + row.spec + " ended at " + std::to_string(rep.final_cost) +
                 ", the first at " + std::to_string(row.converged));
   // The same passes, so the same stages: their times line up with the first run's.
   if (rep.stages.size() == row.stages.size()) row.add_profile(rep);
