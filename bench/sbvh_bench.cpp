@@ -27,7 +27,8 @@
 // for all; --ray-threads threads, default 1; the trees traced in turn, pass after pass,
 // median of --ray-passes passes, default 11, CPU time over the thread count, with the
 // passes' interquartile range), and the work per ray that load does not change: traversal
-// steps and triangle tests.
+// steps and triangle tests. --wide-block sets the bvh8 collapse's c_blk (default
+// WideCostModel's), to see how the two kinds of tree fare under another cost model.
 #ifdef BVHOPT_HAVE_EMBREE
 #include <embree3/rtcore.h>
 
@@ -103,6 +104,7 @@ struct Options {
   uint64_t rays = 200000;
   int ray_passes = 11;
   int ray_threads = 1;
+  double wide_block = WideCostModel{}.block;  // the bvh8 collapse's c_blk (c_node = 1)
   std::string json_path;
   CostModel cost;
 };
@@ -128,6 +130,10 @@ Options parse(int argc, char** argv) {
     else if (a == "--rays") o.rays = std::stoull(args.value());
     else if (a == "--ray-passes") o.ray_passes = std::max(1, std::stoi(args.value()));
     else if (a == "--ray-threads") o.ray_threads = std::max(1, std::stoi(args.value()));
+    else if (a == "--wide-block") {
+      o.wide_block = std::stod(args.value());
+      if (!(o.wide_block > 0.0)) throw Error("--wide-block takes a positive cost");
+    }
     else if (a == "--rotate") {
       o.rotations.clear();
       for (auto& r : split_list(args.value())) o.rotations.push_back(std::stof(r));
@@ -137,10 +143,10 @@ Options parse(int argc, char** argv) {
                    "           [--node-alpha 0.1] [--spatial-bins 32]\n"
                    "           [--embree-budget 1.5] [--opt-seconds S] [--no-embree] [--json FILE]\n"
                    "sbvh_bench --compare [--rotate 0,30] [--rays N] [--ray-passes 11] [--ray-threads 1]\n"
-                   "           [--opt-seconds 20] ...\n";
+                   "           [--opt-seconds 20] [--wide-block 0.25] ...\n";
       std::exit(0);
     } else {
-      throw Error("sbvh_bench: unknown option '" + a + "' (try --help)");
+      throw Error("unknown option '" + a + "' (try --help)");
     }
   }
   return o;
@@ -448,6 +454,7 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     }
     WideTracerOptions wo;
     wo.layout.collapse.width = 8;
+    wo.layout.collapse.cost.block = opt.wide_block;
     tracers.push_back(std::make_unique<WideTracer>(flat, mesh, wo));
     out.push_back({{"scene", name},
                    {"variant", v.name},

@@ -21,9 +21,10 @@
 // into bvh8 and bvh4 and traced by the wide tracer (the ISA default_isa() picks), the best
 // bvh8 also on 2 threads, beside Embree MEDIUM and HIGH. --wide-variants adds the best bvh8
 // with the other choices: distance-sorted children, the watertight triangle test, the greedy
-// collapse, the collapse with c_blk = 0.7, 1 and 1.5 (c_node = 1; to recalibrate the
-// default 1 : 0.5 on another CPU), every ISA the CPU has, and 1 and 2 rays traced side by
-// side. --fit-costs prints, per row, the wide tracer's nodes and blocks per ray beside its
+// collapse, the collapse with c_blk = 0.5, 0.7, 1 and 1.5 (c_node = 1; to recalibrate the
+// default 1 : 0.25 on another CPU; --block-costs C,... traces those c_blk instead, and
+// without --wide-variants only those), every ISA the CPU has, and 1 and 2 rays traced side
+// by side. --fit-costs prints, per row, the wide tracer's nodes and blocks per ray beside its
 // ns/ray, the data the wide cost model is calibrated from. The run ends with each wide
 // tree's geometric mean ratio to Embree MEDIUM over every scene and ray set, per ray set
 // too, and the number of pairs where it is at least 1.
@@ -96,6 +97,9 @@ struct Options {
   std::string json_path;
   bool wide = true;
   bool wide_variants = false;
+  // c_blk values (c_node = 1) whose collapses of the best tree are traced beside the default:
+  // --block-costs, or --wide-variants' 0.7, 1 and 1.5.
+  std::vector<double> block_costs;
   bool fit_costs = false;
   std::string baked_dir;  // empty: no "baked" row
 };
@@ -113,6 +117,14 @@ Options parse(int argc, char** argv) {
     else if (a == "--quick") o.quick = true;
     else if (a == "--no-wide") o.wide = false;
     else if (a == "--wide-variants") o.wide_variants = true;
+    else if (a == "--block-costs") {
+      o.block_costs.clear();
+      for (const std::string& c : split_list(args.value())) {
+        const double v = std::stod(c);
+        if (!(v > 0.0)) throw Error("--block-costs takes positive costs, got '" + c + "'");
+        o.block_costs.push_back(v);
+      }
+    }
     else if (a == "--fit-costs") o.fit_costs = true;
     else if (a == "--wall") o.wall = true;
     else if (a == "--opt-seconds") o.opt_seconds = std::stod(args.value());
@@ -123,7 +135,7 @@ Options parse(int argc, char** argv) {
       o.kinds.clear();
       for (const std::string& k : split_list(args.value())) {
         auto kind = parse_ray_kind(k);
-        if (!kind) throw Error("trace_bench: unknown ray kind '" + k + "'");
+        if (!kind) throw Error("unknown ray kind '" + k + "'");
         o.kinds.push_back(*kind);
       }
     } else if (a == "--help" || a == "-h") {
@@ -131,11 +143,11 @@ Options parse(int argc, char** argv) {
                    "            [--kinds primary,random,ao,path,shadow] [--optimizers] [--opt-seconds S]\n"
                    "            [--quick] [--wall]   (only the leaf-1 sweep tree and best)\n"
                    "            [--best-seconds S] [--best-leaf N]   (the 'best' row; S = 0 drops it)\n"
-                   "            [--json FILE] [--no-wide] [--wide-variants] [--fit-costs]\n"
+                   "            [--json FILE] [--no-wide] [--wide-variants] [--block-costs 0.25,0.35] [--fit-costs]\n"
                    "            [--baked DIR]   (the 'baked' row: DIR/<scene>.bvh from bvhopt bake --quality best)\n";
       std::exit(0);
     } else {
-      throw Error("trace_bench: unknown option '" + a + "'");
+      throw Error("unknown option '" + a + "'");
     }
   }
   o.scenes = scene_specs(o.scene_options);
@@ -335,7 +347,8 @@ double agreement(const std::vector<Hit>& a, const std::vector<Hit>& b, RayQuery 
 
 // The wide rows' tracers: bvh8 and bvh4 of the best and the sweep-l1 trees, and with
 // `variants` the other choices for the best bvh8.
-std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mesh, bool variants) {
+std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mesh, bool variants,
+                                 std::vector<double> block_costs) {
   std::vector<WideTree> out;
   auto add = [&](const Tree& t, const std::string& suffix, WideTracerOptions o) {
     WideTree w;
@@ -352,7 +365,18 @@ std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mes
         o.layout.collapse.width = width;
         add(t, "bvh" + std::to_string(width), o);
       }
-      if (!variants || t.name != "best") continue;
+      if (t.name != "best") continue;
+      if (variants && block_costs.empty()) block_costs = {0.5, 0.7, 1.0, 1.5};
+      // The collapse's cost ratio, to calibrate c_blk : c_node on this CPU (c_node = 1; the
+      // default c_blk is WideCostModel's, 0.25).
+      for (double block : block_costs) {
+        WideTracerOptions o;
+        o.layout.collapse.cost.block = block;
+        char suffix[32];
+        std::snprintf(suffix, sizeof suffix, "bvh8-blk%.*f", block == std::round(block * 10) / 10 ? 1 : 2, block);
+        add(t, suffix, o);
+      }
+      if (!variants) continue;
       WideTracerOptions o;
       o.near_first = NearFirst::distance_sort;
       add(t, "bvh8-sorted", o);
@@ -362,15 +386,6 @@ std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mes
       o = {};
       o.layout.collapse.method = CollapseMethod::greedy;
       add(t, "bvh8-greedy", o);
-      // The collapse's cost ratio, to calibrate c_blk : c_node on this CPU (c_node = 1; the
-      // default c_blk is 0.5).
-      for (double block : {0.7, 1.0, 1.5}) {
-        o = {};
-        o.layout.collapse.cost.block = block;
-        char suffix[32];
-        std::snprintf(suffix, sizeof suffix, "bvh8-blk%.1f", block);
-        add(t, suffix, o);
-      }
       for (Isa isa : {Isa::sse42, Isa::avx2, Isa::avx512}) {
         if (!isa_supported(isa)) continue;
         o = {};
@@ -555,7 +570,7 @@ int run(const Options& opt) {
 #endif
     std::printf("\n## %s: %zu triangles\n", scene.c_str(), mesh.triangle_count());
     std::vector<WideTree> wide;
-    if (opt.wide) wide = wide_trees(trees, mesh, opt.wide_variants);
+    if (opt.wide) wide = wide_trees(trees, mesh, opt.wide_variants, opt.block_costs);
     for (const WideTree& w : wide) {
       const WideLayoutStats& st = w.tracer->layout().stats();
       // One cold run, the tracer's construction included; layout_bench times the target
