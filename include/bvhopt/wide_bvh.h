@@ -17,17 +17,20 @@ namespace bvhopt {
 // The wide SAH cost: C = [c_node * sum_nodes A(n) + c_blk * sum_leaves A(l) * ceil(p(l)/4)]
 // / A(root), p(l) the distinct triangles of leaf l (a leaf block tests 4 triangles at once).
 // Only the ratio matters to the collapse. Calibrated by tracing the best trees of the shared
-// scenes collapsed with c_blk = 0.5, 0.7, 1 and 1.5 (c_node = 1) against Embree in the same
-// run (bench/trace_bench --wide-variants; primary, random and AO rays, 1 thread). On a Xeon
-// (AVX-512) no ratio beat 1:1 beyond the noise. On Zen 4 (AVX-512 kernel), once the kernel
-// prefetched a node's leaf blocks with the node, 0.5 was ahead in each of four runs (geometric
-// mean over the runs' scene and ray pairs +0.5 to +6 %, random rays +5 to +9 %, primary and
-// AO rays mixed) and its layouts are about 10 % smaller, so 0.5 is the default.
+// scenes collapsed with several c_blk (c_node = 1) against Embree in the same run
+// (bench/trace_bench --wide-variants or --block-costs; primary, random and AO rays, 1 thread;
+// docs/wide-bvh.md). On a Xeon (AVX-512) no ratio beat 1:1 beyond the noise. On Zen 4, once
+// the kernel prefetched a node's leaf blocks with the node, 0.5 was ahead of 1. On Zen 5
+// (December 2026, three runs over the 33 scene and ray pairs) 0.25, 0.35 and 0.5 were level
+// overall (geometric means 1.310, 1.316 and 1.316 of Embree's rays/s), 0.25 ahead on primary
+// rays (+2 %) and 1 % behind on random and AO rays, with layouts 10-14 % smaller; and only
+// 0.25 let the spatial-split tree of staircase trace its primary rays faster than the
+// unsplit one (1.10 against 0.93-0.98). So 0.25 is the default.
 // bench/trace_bench --fit-costs prints nodes and blocks per ray beside ns/ray for redoing
 // this on another CPU.
 struct WideCostModel {
-  double node = 1.0;   // c_node, per wide inner node visited
-  double block = 0.5;  // c_blk, per 4-triangle leaf block tested
+  double node = 1.0;    // c_node, per wide inner node visited
+  double block = 0.25;  // c_blk, per 4-triangle leaf block tested
 };
 
 enum class CollapseMethod : uint8_t {
