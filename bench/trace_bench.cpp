@@ -98,7 +98,7 @@ struct Options {
   bool wide = true;
   bool wide_variants = false;
   // c_blk values (c_node = 1) whose collapses of the best tree are traced beside the default:
-  // --block-costs, or --wide-variants' 0.7, 1 and 1.5.
+  // --block-costs, or --wide-variants' 0.5, 0.7, 1 and 1.5.
   std::vector<double> block_costs;
   bool fit_costs = false;
   std::string baked_dir;  // empty: no "baked" row

@@ -23,7 +23,7 @@ namespace bvhopt {
 // the kernel prefetched a node's leaf blocks with the node, 0.5 was ahead of 1. On Zen 5
 // (December 2026, three runs over the 33 scene and ray pairs) 0.25, 0.35 and 0.5 were level
 // overall (geometric means 1.310, 1.316 and 1.316 of Embree's rays/s), 0.25 ahead on primary
-// rays (+2 %) and 1 % behind on random and AO rays, with layouts 10-14 % smaller; and only
+// rays (+3 %) and 2 % behind on random and AO rays, with layouts 10-14 % smaller; and only
 // 0.25 let the spatial-split tree of staircase trace its primary rays faster than the
 // unsplit one (1.10 against 0.93-0.98). So 0.25 is the default.
 // bench/trace_bench --fit-costs prints nodes and blocks per ray beside ns/ray for redoing
