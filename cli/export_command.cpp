@@ -19,6 +19,7 @@ struct ExportOptions {
   SceneOption scene;
   std::string layout = "bvh8";
   std::string format = "flat";
+  WideCostOption wide_cost;
   std::string output;
   bool json = false;
 };
@@ -31,6 +32,7 @@ struct ExportSummary {
 ExportSummary export_flat(const ExportOptions& opt, const FlatBvh& flat, const Mesh& mesh) {
   WideLayoutOptions o;
   o.collapse.width = uint32_t(*parse_trace_layout(opt.layout));
+  o.collapse.cost = opt.wide_cost.model();
   const WideBvh wide(flat, mesh, o);
   write_wide_export_file(opt.output, wide, flat.nodes[0].box);
   return {wide.stats().nodes, wide.stats().blocks, sizeof(WideExportHeader) + wide.stats().bytes, 0.0,
@@ -39,7 +41,7 @@ ExportSummary export_flat(const ExportOptions& opt, const FlatBvh& flat, const M
 
 ExportSummary export_cwbvh(const ExportOptions& opt, const FlatBvh& flat, const Mesh& mesh) {
   if (opt.layout != "bvh8") throw Error("export: --format cwbvh is 8-wide; it needs --layout bvh8, not " + opt.layout);
-  const CompressedWideBvh wide = build_compressed_wide_bvh(flat, mesh);
+  const CompressedWideBvh wide = build_compressed_wide_bvh(flat, mesh, opt.wide_cost.model());
   write_cwbvh_export_file(opt.output, wide, flat.nodes[0].box, mesh.triangle_count());
   const size_t bytes = sizeof(WideExportHeader) + (wide.nodes.size() * sizeof(CwbvhNode) + 63) / 64 * 64 +
                        wide.triangles.size() * sizeof(CwbvhTriangle);
@@ -62,7 +64,7 @@ void run_export(const ExportOptions& opt) {
     print_json({{"bvh", opt.bvh_file}, {"scene", mesh.name}, {"triangles", mesh.triangle_count()},
                 {"layout", opt.layout}, {"format", opt.format}, {"output", opt.output}, {"nodes", s.nodes},
                 {"leaf_items", s.leaf_items}, {"bytes", s.bytes}, {"bytes_per_triangle", per_triangle},
-                {"wide_sah", s.sah}, {"seconds", s.seconds}});
+                {"wide_sah", s.sah}, {"wide_block_cost", opt.wide_cost.block}, {"seconds", s.seconds}});
     return;
   }
   std::cout << "wrote      " << opt.output << " (" << opt.format << ", " << opt.layout << ")\n"
@@ -88,6 +90,7 @@ void register_export_command(CLI::App& app) {
                   "flat (the wide tracer's nodes and 4-triangle blocks) | cwbvh (80-byte compressed 8-wide nodes)")
       ->check(CLI::IsMember({"flat", "cwbvh"}))
       ->capture_default_str();
+  opt->wide_cost.add_to(cmd);
   cmd->add_option("-o,--output", opt->output, "Output file (written atomically)")->required()->type_name("FILE");
   cmd->add_flag("--json", opt->json, "Print a summary as JSON");
   cmd->callback([opt] { run_export(*opt); });

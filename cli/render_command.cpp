@@ -36,6 +36,7 @@ struct RenderOptions {
   bool json = false;
   CameraOptions camera;
   LayoutOption layout;
+  WideCostOption wide_cost;
 };
 
 // One tree's primary-ray picture.
@@ -91,7 +92,7 @@ void run_render(const RenderOptions& opt) {
   }
   auto threads = opt.threads.apply();
   ProgressLine progress;
-  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout());
+  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout(), opt.wide_cost.model());
   const Mesh& mesh = loaded.mesh;
   const LoadedTree& tree = loaded.tree;
   progress.finish();
@@ -101,7 +102,7 @@ void run_render(const RenderOptions& opt) {
 
   const TracedView a = trace_view(tree, order, rays);
   std::optional<TracedView> b;
-  if (!opt.compare.empty()) b = trace_view(load_tree_for_scene(opt.compare, mesh, opt.layout.layout()), order, rays);
+  if (!opt.compare.empty()) b = trace_view(load_tree_for_scene(opt.compare, mesh, opt.layout.layout(), opt.wide_cost.model()), order, rays);
 
   // One scale for both heat maps, so that equal colours are equal steps.
   std::vector<const std::vector<TraceCounters>*> maps{&a.counters};
@@ -161,7 +162,7 @@ void run_render(const RenderOptions& opt) {
   if (opt.json) {
     nlohmann::json j = {{"bvh", opt.bvh_file},   {"scene", mesh.name},         {"width", cam.width},
                         {"height", cam.height},  {"heatmap", opt.heatmap},     {"mean_steps", mean_a},
-                        {"layout", opt.layout.name}, {"max_steps", max_steps}, {"scale", opt.scale},
+                        {"layout", opt.layout.name}, {"wide_block_cost", opt.wide_cost.block}, {"max_steps", max_steps}, {"scale", opt.scale},
                         {"legend", !opt.no_legend && text != nullptr}, {"hit_fraction", hit_fraction}};
     if (!opt.shaded.empty()) j["shaded"] = opt.shaded;
     if (b) {
@@ -231,6 +232,7 @@ void register_render_command(CLI::App& app) {
   cmd->add_option("--order", opt->order, "axis | distance")->check(CLI::IsMember({"axis", "distance"}))->capture_default_str();
   opt->camera.add_to(cmd);
   opt->layout.add_to(cmd);
+  opt->wide_cost.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print a summary as JSON");
   cmd->callback([opt] { run_render(*opt); });

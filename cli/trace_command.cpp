@@ -51,6 +51,7 @@ struct TraceOptions {
   uint32_t width = 1024, height = 768;
   CameraOptions camera;
   LayoutOption layout;
+  WideCostOption wide_cost;
 };
 
 // What one run measured, for the report.
@@ -96,6 +97,7 @@ void print_trace_json(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
                       {"layout", opt.layout.name},
                       {"isa", std::string(tree.traced(parse_child_order(opt.order)).isa())},
                       {"layout_seconds", tree.layout_seconds},
+                      {"wide_block_cost", opt.wide_cost.block},
                       {"hit_rate", m1.hit_rate},
                       {"threads_1", {{"seconds", m1.seconds}, {"rays_per_second", m1.rays_per_second}}},
                       {"threads_n", {{"threads", mn.threads}, {"seconds", mn.seconds},
@@ -112,7 +114,10 @@ void print_trace_text(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
   const RayMeasurement& mn = r.all_threads;
   std::cout << "tree       " << opt.bvh_file << " (" << tree.info.method << ")\n"
             << "layout     " << opt.layout.name << ", " << tree.traced(parse_child_order(opt.order)).isa() << " kernel"
-            << (tree.wide ? ", built in " + format_double(1e3 * tree.layout_seconds, 1) + " ms" : std::string()) << "\n"
+            << (tree.wide ? ", built in " + format_double(1e3 * tree.layout_seconds, 1) + " ms (c_blk " +
+                                format_double(opt.wide_cost.block, 2) + ")"
+                          : std::string())
+            << "\n"
             << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles)\n"
             << "rays       " << r.set.rays.size() << " " << ray_kind_name(r.set.kind)
             << (r.set.query == RayQuery::any ? " (any hit)" : " (closest hit)") << ", seed " << r.set.seed << "\n"
@@ -166,7 +171,7 @@ void run_trace(const TraceOptions& opt) {
   if (!opt.save_rays.empty()) check_output_path(opt.save_rays, "--save-rays");
   auto threads = opt.threads.apply();
   ProgressLine progress;
-  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout());
+  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout(), opt.wide_cost.model());
   const Mesh& mesh = loaded.mesh;
   const LoadedTree& tree = loaded.tree;
   const ChildOrder order = parse_child_order(opt.order);
@@ -240,6 +245,7 @@ void register_trace_command(CLI::App& app) {
       ->type_name("FILE");
   opt->camera.add_to(cmd);
   opt->layout.add_to(cmd);
+  opt->wide_cost.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print the results as JSON");
   cmd->callback([opt] { run_trace(*opt); });

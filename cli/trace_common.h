@@ -35,11 +35,30 @@ struct LayoutOption {
   TraceLayout layout() const { return *parse_trace_layout(name); }
 };
 
+// --wide-block: the wide collapse's cost of a leaf block (c_blk, with c_node = 1), for a
+// layout made under another cost model than the default, calibrated on one CPU
+// (docs/wide-bvh.md): 0.5, say, for the layout of before December 2026.
+struct WideCostOption {
+  double block = WideCostModel{}.block;
+
+  void add_to(CLI::App* cmd) {
+    cmd->add_option("--wide-block", block,
+                    "bvh4 / bvh8: the collapse's cost of a 4-triangle leaf block per wide node visited (c_blk; "
+                    "docs/wide-bvh.md)")
+        ->check(finite_number())
+        ->check(positive_number())
+        ->capture_default_str();
+  }
+  WideCostModel model() const { return {WideCostModel{}.node, block}; }
+};
+
 // The wide tracer of a bvh4 / bvh8 layout (null for bvh2).
-inline std::unique_ptr<WideTracer> make_wide_tracer(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout) {
+inline std::unique_ptr<WideTracer> make_wide_tracer(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout,
+                                                    const WideCostModel& cost = {}) {
   if (layout == TraceLayout::bvh2) return nullptr;
   WideTracerOptions o;
   o.layout.collapse.width = uint32_t(layout);
+  o.layout.collapse.cost = cost;
   return std::make_unique<WideTracer>(flat, mesh, o);
 }
 
@@ -64,7 +83,7 @@ inline BvhFile read_tree_for_scene(const std::string& file, const Mesh& mesh) {
 }
 
 inline LoadedTree load_tree_for_scene(const std::string& file, const Mesh& mesh,
-                                      TraceLayout layout = TraceLayout::bvh2) {
+                                      TraceLayout layout = TraceLayout::bvh2, const WideCostModel& cost = {}) {
   BvhFile f = read_tree_for_scene(file, mesh);
   LoadedTree t;
   t.info = f.info;
@@ -72,7 +91,7 @@ inline LoadedTree load_tree_for_scene(const std::string& file, const Mesh& mesh,
   t.tracer = std::make_unique<Tracer>(flat, mesh);
   if (layout != TraceLayout::bvh2) {
     const auto start = std::chrono::steady_clock::now();
-    t.wide = make_wide_tracer(flat, mesh, layout);
+    t.wide = make_wide_tracer(flat, mesh, layout, cost);
     t.layout_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   return t;
@@ -84,11 +103,12 @@ struct SceneAndTree {
   LoadedTree tree;
 };
 inline SceneAndTree load_scene_and_tree(const SceneOption& scene, const std::string& bvh_file,
-                                        ProgressLine& progress, TraceLayout layout = TraceLayout::bvh2) {
+                                        ProgressLine& progress, TraceLayout layout = TraceLayout::bvh2,
+                                        const WideCostModel& cost = {}) {
   progress.update("loading " + scene.spec + " and " + bvh_file, true);
   SceneAndTree out;
   out.mesh = scene.load();
-  out.tree = load_tree_for_scene(bvh_file, out.mesh, layout);
+  out.tree = load_tree_for_scene(bvh_file, out.mesh, layout, cost);
   return out;
 }
 

@@ -42,6 +42,38 @@ TEST_F(WideCli, TraceEveryLayoutAgreesWithBruteForceAndReportsTheIsa) {
   }
 }
 
+// --wide-block sets the collapse's c_blk: the layout still traces exactly, the JSON says
+// which cost ran (the library's default when not given), and a dearer leaf block gives a
+// dearer optimal collapse (its cost, nodes + c_blk * blocks, grows with c_blk wherever a
+// leaf block is left).
+TEST_F(WideCli, TraceAndExportTakeTheCollapsesBlockCost) {
+  const fs::path bvh = dir_ / "s.bvh";
+  const std::string scene = " --scene 'builtin?triangles=4000'";
+  ASSERT_EQ(run("build 'builtin?triangles=4000' -o " + bvh.string()).exit_code, 0);
+  for (const char* block : {"", " --wide-block 2"}) {
+    CliRun r = run("trace " + bvh.string() + scene + " --rays random --count 2000 --check 2000 --repeats 1 --json" + block);
+    ASSERT_EQ(r.exit_code, 0) << block << ": " << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["brute_force"]["mismatches"], 0) << block;
+    EXPECT_EQ(j["wide_block_cost"].get<double>(), *block ? 2.0 : bvhopt::WideCostModel{}.block);
+  }
+  double sah[2];
+  for (int i = 0; i < 2; ++i) {
+    const fs::path out = dir_ / ("w" + std::to_string(i) + ".flat");
+    CliRun r = run("export " + bvh.string() + scene + " --json -o " + out.string() + (i ? " --wide-block 2" : ""));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    sah[i] = j["wide_sah"].get<double>();
+    EXPECT_EQ(j["wide_block_cost"].get<double>(), i ? 2.0 : bvhopt::WideCostModel{}.block);
+  }
+  EXPECT_GT(sah[1], sah[0]);
+  for (const char* bad : {"0", "-1", "nan"}) {
+    CliRun r = run("trace " + bvh.string() + scene + " --rays random --count 10 --wide-block " + bad);
+    EXPECT_NE(r.exit_code, 0) << bad;
+    EXPECT_NE(r.err.find("--wide-block"), std::string::npos) << r.err;
+  }
+}
+
 TEST_F(WideCli, StatsReportsTheWideSahCosts) {
   const fs::path bvh = dir_ / "s.bvh";
   ASSERT_EQ(run("build 'builtin?triangles=4000' -o " + bvh.string()).exit_code, 0);
