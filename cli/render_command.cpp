@@ -92,7 +92,8 @@ void run_render(const RenderOptions& opt) {
   }
   auto threads = opt.threads.apply();
   ProgressLine progress;
-  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout(), opt.wide_cost.model());
+  const SceneAndTree loaded =
+      load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout(), opt.wide_cost.model());
   const Mesh& mesh = loaded.mesh;
   const LoadedTree& tree = loaded.tree;
   progress.finish();
@@ -102,7 +103,8 @@ void run_render(const RenderOptions& opt) {
 
   const TracedView a = trace_view(tree, order, rays);
   std::optional<TracedView> b;
-  if (!opt.compare.empty()) b = trace_view(load_tree_for_scene(opt.compare, mesh, opt.layout.layout(), opt.wide_cost.model()), order, rays);
+  if (!opt.compare.empty())
+    b = trace_view(load_tree_for_scene(opt.compare, mesh, opt.layout.layout(), opt.wide_cost.model()), order, rays);
 
   // One scale for both heat maps, so that equal colours are equal steps.
   std::vector<const std::vector<TraceCounters>*> maps{&a.counters};
@@ -162,8 +164,9 @@ void run_render(const RenderOptions& opt) {
   if (opt.json) {
     nlohmann::json j = {{"bvh", opt.bvh_file},   {"scene", mesh.name},         {"width", cam.width},
                         {"height", cam.height},  {"heatmap", opt.heatmap},     {"mean_steps", mean_a},
-                        {"layout", opt.layout.name}, {"wide_block_cost", opt.wide_cost.block}, {"max_steps", max_steps}, {"scale", opt.scale},
-                        {"legend", !opt.no_legend && text != nullptr}, {"hit_fraction", hit_fraction}};
+                        {"layout", opt.layout.name}, {"max_steps", max_steps}, {"scale", opt.scale},
+                        {"legend", !opt.no_legend && text != nullptr}, {"hit_fraction", hit_fraction},
+                        {"wide_block_cost", opt.wide_cost.block}};
     if (!opt.shaded.empty()) j["shaded"] = opt.shaded;
     if (b) {
       j["compare"] = opt.compare;

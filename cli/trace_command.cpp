@@ -171,7 +171,8 @@ void run_trace(const TraceOptions& opt) {
   if (!opt.save_rays.empty()) check_output_path(opt.save_rays, "--save-rays");
   auto threads = opt.threads.apply();
   ProgressLine progress;
-  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout(), opt.wide_cost.model());
+  const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout(),
+                                                 opt.wide_cost.model());
   const Mesh& mesh = loaded.mesh;
   const LoadedTree& tree = loaded.tree;
   const ChildOrder order = parse_child_order(opt.order);
