@@ -61,6 +61,7 @@ struct DemoOptions {
   bool quick = false;
   bool json = false;
   LayoutOption layout;
+  WideCostOption wide_cost;
 };
 
 // The built-in scene, and every tree measured on it against the same ray sets (made once,
@@ -95,7 +96,7 @@ void DemoRun::measure(const std::string& method, double seconds, const Bvh& bvh,
   progress.update("tracing: " + row.method, true);
   const FlatBvh flat = finalize(bvh, tree_refs ? *tree_refs : refs);
   Tracer tracer(flat, mesh);
-  const std::unique_ptr<WideTracer> wide = make_wide_tracer(flat, mesh, opt.layout.layout());
+  const std::unique_ptr<WideTracer> wide = make_wide_tracer(flat, mesh, opt.layout.layout(), opt.wide_cost.model());
   const AnyTracer traced = wide ? AnyTracer(*wide) : AnyTracer(tracer);
   if (primary_rays.empty()) {
     RaySetConfig config;
@@ -203,7 +204,8 @@ void print_demo(const DemoRun& run, const std::filesystem::path& unopt_png, cons
                         {"c_t", model.traversal},
                         {"c_i", model.intersection},
                         {"layout", opt.layout.name},
-                        {"heatmaps", {unopt_png.string(), best_png.string()}}};
+                        {"heatmaps", {unopt_png.string(), best_png.string()}},
+                        {"wide_block_cost", opt.wide_cost.block}};
     for (const DemoRow& r : run.rows)
       j["rows"].push_back({{"method", r.method},
                            {"seconds", r.seconds},
@@ -274,6 +276,7 @@ void register_demo_command(CLI::App& app) {
   cmd->add_flag("--quick", opt->quick, "Shorter annealing schedule (250 passes instead of 1250)");
   opt->cost.add_to(cmd);
   opt->layout.add_to(cmd);
+  opt->wide_cost.add_to(cmd);
   opt->threads.add_to(cmd);
   cmd->add_flag("--json", opt->json, "Print JSON");
   cmd->callback([opt] { run_demo(*opt); });

@@ -33,6 +33,7 @@ struct ExperimentOptions {
   std::string plot_script;
   ThreadsOption threads;
   LayoutOption layout;
+  WideCostOption wide_cost;
   std::vector<std::string> merge_dirs;
   std::string merge_out;
 };
@@ -112,6 +113,7 @@ ExperimentConfig experiment_config(const ExperimentOptions& opt, bool budget_giv
   if (config.scenes.empty()) throw Error("experiment: give --scenes DIR or --scene FILE");
   config.seed = opt.seed;
   config.layout = opt.layout.layout();
+  config.wide_cost = opt.wide_cost.model();
   config.rays = opt.rays;
   if (opt.quick) config = quick_experiment_config(config);
   if (budget_given || !opt.quick) config.time_budget = opt.time_budget;
@@ -174,6 +176,7 @@ void register_experiment_command(CLI::App& app) {
   cmd->add_flag("--quick", opt->quick, "Small settings for a trial run: 20k rays, 4 frames, t in {10, 14}, 10 s budget");
   cmd->add_option("--plot-script", opt->plot_script, "The plotting script (default: scripts/plot_experiment.py found beside the program)");
   opt->layout.add_to(cmd);
+  opt->wide_cost.add_to(cmd);
   opt->threads.add_to(cmd);
 
   CLI::App* merge = cmd->add_subcommand("merge", "Join the output folders of the shards of one run into one report");

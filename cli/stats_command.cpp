@@ -7,6 +7,7 @@
 #include "bvhopt/triangle_cost.h"
 #include "bvhopt/wide_bvh.h"
 #include "cli_common.h"
+#include "trace_common.h"
 #include "commands.h"
 
 namespace bvhopt::cli {
@@ -20,6 +21,7 @@ struct StatsOptions {
   bool ct_given = false, ci_given = false;  // set from the command line, not options
   bool json = false;
   bool per_depth = false;
+  WideCostOption wide_cost;
 };
 
 // Prints the statistics of the file's tree, with its own cost constants unless --ct or
@@ -39,6 +41,7 @@ void run_stats(const StatsOptions& opt) {
     for (int i = 0; i < 2; ++i) {
       CollapseOptions o;
       o.width = i == 0 ? 4 : 8;
+      o.cost = opt.wide_cost.model();
       wide_sah[i] = collapse_to_wide(flat, o).sah_cost;
     }
   }
@@ -65,7 +68,8 @@ void run_stats(const StatsOptions& opt) {
                 {"inner_area_by_depth", st.inner_area_by_depth},
                 {"leaf_area_by_depth", st.leaf_area_by_depth},
                 {"wide_sah_bvh4", wide_sah[0]},
-                {"wide_sah_bvh8", wide_sah[1]}});
+                {"wide_sah_bvh8", wide_sah[1]},
+                {"wide_block_cost", opt.wide_cost.block}});
     return;
   }
   std::cout << "file        " << opt.input << "\n"
@@ -84,7 +88,7 @@ void run_stats(const StatsOptions& opt) {
             << "area sums   inner " << format_double(st.inner_area_sum / st.root_area, 2) << ", leaves "
             << format_double(st.leaf_area_sum / st.root_area, 2) << " (relative to the root)\n"
             << "wide SAH    bvh4 " << format_double(wide_sah[0], 3) << ", bvh8 " << format_double(wide_sah[1], 3)
-            << "   (SAH-optimal collapse, c_node " << WideCostModel{}.node << ", c_blk " << WideCostModel{}.block
+            << "   (SAH-optimal collapse, c_node " << opt.wide_cost.model().node << ", c_blk " << opt.wide_cost.block
             << ")\n";
   if (opt.per_depth) {
     std::cout << "depth  inner_area/root  leaf_area/root\n";
@@ -103,6 +107,7 @@ void register_stats_command(CLI::App& app) {
   // Not CLI::ExistingFile: a missing file is bad input (exit 1), which read_bvh_file reports.
   cmd->add_option("file", opt->input, "BVH file")->required();
   opt->cost.add_to(cmd);
+  opt->wide_cost.add_to(cmd);
   cmd->add_flag("--per-depth", opt->per_depth, "Also print the inner and leaf area sums per depth");
   cmd->add_flag("--json", opt->json, "Print JSON");
   cmd->callback([opt, cmd] {

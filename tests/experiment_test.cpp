@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "bvhopt/build.h"
@@ -20,6 +21,7 @@
 #include "bvhopt/references.h"
 #include "bvhopt/scene_file.h"
 #include "bvhopt/tree_rotations.h"
+#include "bvhopt/wide_bvh.h"
 #include "experiment/experiment.h"
 #include "test_support.h"
 
@@ -375,22 +377,35 @@ TEST(Experiment, CommandLineRuns) {
                           (out / "run").string() + "' > '" + (out / "log.txt").string() + "' 2>&1";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << read_text(out / "log.txt");
   EXPECT_TRUE(fs::exists(out / "run" / "report.md"));
-  // --layout: recorded in the settings and the report, and the rays really go through it
-  // (a 4-wide tree takes fewer traversal steps than the binary one on the same rays).
-  auto sah_steps = [&](const std::string& layout) {
-    const fs::path dir = out / layout;
+  // --layout and --wide-block: recorded in the settings and the report, and the rays really
+  // go through them (a 4-wide tree takes fewer traversal steps than the binary one on the same
+  // rays; a dearer leaf block, c_blk, collapses into smaller leaves: fewer triangle tests).
+  // The SAH tree's primary-ray figures.
+  auto sah_primary = [&](const std::string& layout, const std::string& block) {
+    const fs::path dir = out / (layout + block);
     const std::string run = "'" + exe + "' experiment --scene 'builtin?triangles=4000' --quick --rays 2000 --out '" +
-                            dir.string() + "' --layout " + layout + " > '" + (out / "log.txt").string() + "' 2>&1";
+                            dir.string() + "' --layout " + layout + (block.empty() ? "" : " --wide-block " + block) +
+                            " > '" + (out / "log.txt").string() + "' 2>&1";
     EXPECT_EQ(std::system(run.c_str()), 0) << read_text(out / "log.txt");
     const nlohmann::json r = nlohmann::json::parse(read_text(dir / "results.json"));
     EXPECT_EQ(r["settings"]["layout"], layout);
-    EXPECT_NE(read_text(dir / "report.md").find("in the " + layout + " layout"), std::string::npos);
+    EXPECT_EQ(r["settings"]["wide_block_cost"].get<double>(), block.empty() ? WideCostModel{}.block : std::stod(block));
+    const std::string report = read_text(dir / "report.md");
+    EXPECT_NE(report.find("in the " + layout + " layout"), std::string::npos);
+    if (layout != "bvh2") {
+      EXPECT_NE(report.find("c_blk = " + r["settings"]["wide_block_cost"].dump()), std::string::npos) << report;
+    }
     for (const auto& task : r["tasks"])
-      if (task.contains("det") && task["det"].contains("trees")) return task["det"]["trees"]["sah"]["steps"]["primary"].get<double>();
+      if (task.contains("det") && task["det"].contains("trees")) {
+        const nlohmann::json& sah = task["det"]["trees"]["sah"];
+        return std::pair(sah["steps"]["primary"].get<double>(), sah["triangle_tests"]["primary"].get<double>());
+      }
     ADD_FAILURE() << "no traced trees in " << dir;
-    return 0.0;
+    return std::pair(0.0, 0.0);
   };
-  EXPECT_LT(sah_steps("bvh4"), 0.8 * sah_steps("bvh2"));
+  const auto bvh4 = sah_primary("bvh4", "");
+  EXPECT_LT(bvh4.first, 0.8 * sah_primary("bvh2", "").first);
+  EXPECT_LT(sah_primary("bvh4", "4").second, bvh4.second);
   const std::string bad = "'" + exe + "' experiment --scene 'builtin?triangles=4000' --shard 3/2 --out '" +
                           (out / "bad").string() + "' > '" + (out / "bad.txt").string() + "' 2>&1";
   EXPECT_NE(std::system(bad.c_str()), 0);

@@ -84,6 +84,23 @@ TEST_F(WideCli, StatsReportsTheWideSahCosts) {
   EXPECT_GT(w8, 1.0);
   // Every 4-wide collapse is also an 8-wide one, so the optimal 8-wide costs no more.
   EXPECT_LE(w8, w4 * (1.0 + 1e-6));
+  EXPECT_EQ(j["wide_block_cost"].get<double>(), bvhopt::WideCostModel{}.block);
+  // --wide-block: the costs of the collapses under that c_blk, dearer for a dearer block, and
+  // the same figures as export's for the layout it writes.
+  CliRun dear = run("stats --json --wide-block 2 " + bvh.string());
+  ASSERT_EQ(dear.exit_code, 0) << dear.err;
+  const auto d = nlohmann::json::parse(dear.out);
+  EXPECT_EQ(d["wide_block_cost"].get<double>(), 2.0);
+  EXPECT_GT(d["wide_sah_bvh8"].get<double>(), w8);
+  EXPECT_GT(d["wide_sah_bvh4"].get<double>(), w4);
+  CliRun e = run("export " + bvh.string() + " --scene 'builtin?triangles=4000' --json --wide-block 2 -o " +
+                 (dir_ / "w.flat").string());
+  ASSERT_EQ(e.exit_code, 0) << e.err;
+  EXPECT_NEAR(nlohmann::json::parse(e.out)["wide_sah"].get<double>(), d["wide_sah_bvh8"].get<double>(),
+              1e-9 * d["wide_sah_bvh8"].get<double>());
+  CliRun text = run("stats --wide-block 2 " + bvh.string());
+  EXPECT_NE(text.out.find("c_blk 2)"), std::string::npos) << text.out;
+  EXPECT_NE(run("stats --wide-block 0 " + bvh.string()).exit_code, 0);
 }
 
 TEST_F(WideCli, ForcedIsaRunsAndAMissingOrUnknownOneIsAnError) {
@@ -122,9 +139,11 @@ TEST_F(WideCli, RenderAndDemoTakeTheLayout) {
     EXPECT_EQ(j["layout"], layout);
     EXPECT_GT(j["mean_steps"].get<double>(), 0.0);
   }
-  CliRun d = run("demo --triangles 4000 --rays 2000 --quick --json --layout bvh4 --images " + (dir_ / "demo").string());
+  CliRun d = run("demo --triangles 4000 --rays 2000 --quick --json --layout bvh4 --wide-block 0.5 --images " +
+                 (dir_ / "demo").string());
   ASSERT_EQ(d.exit_code, 0) << d.err;
   EXPECT_EQ(nlohmann::json::parse(d.out)["layout"], "bvh4");
+  EXPECT_EQ(nlohmann::json::parse(d.out)["wide_block_cost"].get<double>(), 0.5);
   CliRun bad = run("trace " + bvh.string() + " --scene 'builtin?triangles=4000' --layout bvh16");
   EXPECT_NE(bad.exit_code, 0);
 }

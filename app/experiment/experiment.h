@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "bvhopt/any_tracer.h"
+#include "bvhopt/wide_bvh.h"
 #include "bvhopt/insertion_optimizer.h"
 
 namespace bvhopt {
@@ -53,6 +54,8 @@ struct ExperimentConfig {
   // The layout every ray measurement traces the trees in (the default: the fastest measured,
   // see any_tracer.h). Heat maps always show the binary tree's traversal steps.
   TraceLayout layout = kDefaultTraceLayout;
+  // The cost model of the wide layout's collapse (its c_blk: --wide-block).
+  WideCostModel wide_cost;
   // Figure 4's sweep of t (subdivision threshold exponent); Figure 5's frame count and t.
   std::vector<int> evh_t_values = {8, 10, 12, 14, 16, 18, 20};
   uint32_t rotation_frames = 64;

@@ -412,7 +412,11 @@ void write_report(const json& results, const ReportTables& t, const fs::path& ou
     << ", " << s["rotation_frames"] << " rotation frames at t = " << s["rotation_t"] << ", cost model c_T = "
     << s["cost_model"]["c_T"] << ", c_I = " << s["cost_model"]["c_I"] << ". Ray times are traced on each tree "
     << "compacted to leaves of up to " << s["traced_leaf_size"] << " triangles (the same for every method) in the "
-    << (s.contains("layout") ? s["layout"].get<std::string>() : std::string("bvh2")) << " layout; "
+    << (s.contains("layout") ? s["layout"].get<std::string>() : std::string("bvh2")) << " layout"
+    << (s.contains("wide_block_cost") && s.value("layout", "bvh2") != "bvh2"
+            ? " (collapsed with c_blk = " + s["wide_block_cost"].dump() + ")"
+            : std::string())
+    << "; "
     << "times are seconds for the whole ray set, on all threads.\n\n";
   r << "Costs, reference counts, traversal steps and per-pass costs are deterministic (the same on any machine, "
        "thread count and shard split); times are not. `results.json` keeps them apart (`det` and `timing`).\n\n";

@@ -139,6 +139,7 @@ json settings_json(const ExperimentConfig& c) {
               {"heatmap_height", c.heatmap_height},
               {"traced_leaf_size", kTracedLeafSize},
               {"layout", std::string(trace_layout_name(c.layout))},
+              {"wide_block_cost", c.wide_cost.block},
               {"evh_leaf_size", kEvhLeafSize},
               {"cost_model", {{"c_T", CostModel{}.traversal}, {"c_I", CostModel{}.intersection}}}};
 }
@@ -214,11 +215,12 @@ Tracer make_tracer(const Bvh& bvh, const PrimitiveRefs& refs, const Mesh& mesh) 
   return Tracer(traced_flat(bvh, refs), mesh);
 }
 
-// The wide tracer of a layout (none for bvh2).
-std::unique_ptr<WideTracer> make_wide(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout) {
-  if (layout == TraceLayout::bvh2) return nullptr;
+// The wide tracer of the configured layout and collapse cost (none for bvh2).
+std::unique_ptr<WideTracer> make_wide(const FlatBvh& flat, const Mesh& mesh, const ExperimentConfig& c) {
+  if (c.layout == TraceLayout::bvh2) return nullptr;
   WideTracerOptions o;
-  o.layout.collapse.width = uint32_t(layout);
+  o.layout.collapse.width = uint32_t(c.layout);
+  o.layout.collapse.cost = c.wide_cost;
   return std::make_unique<WideTracer>(flat, mesh, o);
 }
 
@@ -232,8 +234,8 @@ struct TracedTree {
   Tracer tracer;                     // binary: heat maps
   std::unique_ptr<WideTracer> wide;  // the configured wide layout: ray measurements
 
-  TracedTree(std::string k, const FlatBvh& flat, const Mesh& mesh, TraceLayout layout)
-      : key(std::move(k)), tracer(flat, mesh), wide(make_wide(flat, mesh, layout)) {}
+  TracedTree(std::string k, const FlatBvh& flat, const Mesh& mesh, const ExperimentConfig& c)
+      : key(std::move(k)), tracer(flat, mesh), wide(make_wide(flat, mesh, c)) {}
   AnyTracer traced() const { return wide ? AnyTracer(*wide) : AnyTracer(tracer); }
 };
 void measure_trees(Runner& run, const std::vector<TracedTree>& trees, const RaySets& rays, json& det_trees,
@@ -475,11 +477,11 @@ json run_optimizers(Runner& run, const Mesh& mesh, const std::string& name, cons
   std::string best_key = "sah";
   double best_cost = trees["sah"]["cost"].get<double>();
   std::vector<TracedTree> traced;
-  const TraceLayout layout = run.config().layout;
-  traced.emplace_back("sah", traced_flat(sah, refs), mesh, layout);
-  traced.emplace_back("median", traced_flat(median, refs), mesh, layout);
+  const ExperimentConfig& config = run.config();
+  traced.emplace_back("sah", traced_flat(sah, refs), mesh, config);
+  traced.emplace_back("median", traced_flat(median, refs), mesh, config);
   for (auto& [key, tree] : optimized.trees) {
-    traced.emplace_back(key, traced_flat(tree, refs), mesh, layout);
+    traced.emplace_back(key, traced_flat(tree, refs), mesh, config);
     const double c = trees[key]["cost"].get<double>();
     if (c < best_cost) {
       best_cost = c;
@@ -517,7 +519,7 @@ EvhTrace trace_evh_tree(const Mesh& mesh, const PrimitiveRefs& refs, const RaySe
   dedup_leaf_references(bvh, refs);
   const FlatBvh flat = finalize(bvh, refs);
   const Tracer tracer(flat, mesh);
-  const std::unique_ptr<WideTracer> wide = make_wide(flat, mesh, cfg.layout);
+  const std::unique_ptr<WideTracer> wide = make_wide(flat, mesh, cfg);
   MeasureOptions mo;
   mo.repeats = std::max(1, cfg.repeats);
   RayMeasurement m = measure_rays(wide ? AnyTracer(*wide) : AnyTracer(tracer), rays.rays, rays.query, mo);

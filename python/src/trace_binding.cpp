@@ -3,8 +3,10 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <cmath>
 #include <cstring>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <type_traits>
 
@@ -60,13 +62,19 @@ std::vector<Ray> rays_from(const py::array_t<float, py::array::c_style | py::arr
 
 TraceResult trace(const Tree& tree, const Scene& scene, const py::array_t<float, py::array::c_style | py::array::forcecast>& array,
                   const std::string& layout, const std::string& query, const std::string& order,
-                  std::optional<int> threads, int repeats) {
+                  std::optional<int> threads, int repeats, std::optional<double> wide_block) {
   const std::optional<TraceLayout> wide = parse_trace_layout(layout);
   if (!wide) throw Error("trace: unknown layout '" + layout + "' (known: bvh2, bvh4, bvh8)");
   if (query != "closest" && query != "any") throw Error("trace: query must be 'closest' or 'any', got '" + query + "'");
   if (order != "split-axis" && order != "distance") throw Error("trace: order must be 'split-axis' or 'distance', got '" + order + "'");
   if (repeats < 1) throw Error("trace: repeats must be at least 1, got " + std::to_string(repeats));
   if (threads && *threads < 1) throw Error("trace: threads must be at least 1 (or None for all cores)");
+  if (wide_block && !(std::isfinite(*wide_block) && *wide_block > 0.0)) {
+    std::ostringstream m;
+    m << "trace: wide_block must be a finite number above 0 (or None for the default, " << WideCostModel{}.block
+      << "), got " << *wide_block;
+    throw Error(m.str());
+  }
   const std::vector<Ray> rays = rays_from(array);
   const RayQuery q = query == "any" ? RayQuery::any : RayQuery::closest;
   MeasureOptions options;
@@ -84,6 +92,7 @@ TraceResult trace(const Tree& tree, const Scene& scene, const py::array_t<float,
     if (*wide != TraceLayout::bvh2) {
       WideTracerOptions o;
       o.layout.collapse.width = uint32_t(*wide);
+      if (wide_block) o.layout.collapse.cost.block = *wide_block;
       wide_tracer = std::make_unique<WideTracer>(finalize(tree.bvh, tree.refs), scene.mesh, o);
     }
     const AnyTracer tracer = wide_tracer ? AnyTracer(*wide_tracer) : AnyTracer(*binary, options.order);
@@ -130,7 +139,9 @@ void register_trace(py::class_<Tree>& tree) {
       });
   tree.def("trace", &trace, py::arg("scene"), py::arg("rays"), py::arg("layout") = "bvh8", py::arg("query") = "closest",
            py::arg("order") = "split-axis", py::arg("threads") = py::none(), py::arg("repeats") = 3,
-           "Traces an n x 8 float32 ray array (see bvhopt.rays) through the tree laid out as `layout`: 'bvh8' (the default, as the command line's), 'bvh4' (wide SIMD nodes, collapsed from the binary tree) or 'bvh2' (binary nodes)");
+           py::arg("wide_block") = py::none(),
+           "Traces an n x 8 float32 ray array (see bvhopt.rays) through the tree laid out as `layout`: 'bvh8' (the default, as the command line's), 'bvh4' (wide SIMD nodes, collapsed from the binary tree) or 'bvh2' (binary nodes). "
+           "`wide_block`: the wide collapse's cost of a 4-triangle leaf block (c_blk, as the command line's --wide-block; None: the library's default)");
   tree.def_static("layouts", [] { return known_layouts(); });
 }
 

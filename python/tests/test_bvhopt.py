@@ -152,6 +152,15 @@ def test_rays_and_trace(cli, tmp_path, scene):
         wide = bvh.trace(scene, rays, layout=layout, repeats=1)
         np.testing.assert_array_equal(wide.triangle_id != 0xFFFFFFFF, hit)
         np.testing.assert_allclose(wide.t[hit], r.t[hit], rtol=1e-4)
+    # a dearer leaf block (c_blk, the command line's --wide-block) collapses into smaller
+    # leaves: the same hits for fewer triangle tests
+    dear = bvh.trace(scene, rays, layout="bvh8", repeats=1, wide_block=4.0)
+    np.testing.assert_array_equal(dear.triangle_id, wide.triangle_id)
+    np.testing.assert_array_equal(dear.t, wide.t)
+    assert dear.triangle_tests.sum() < wide.triangle_tests.sum()
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(bvhopt.Error, match="wide_block"):
+            bvh.trace(scene, rays, layout="bvh8", repeats=1, wide_block=bad)
     bvh.save(tmp_path / "t.bvh")
     ref = run_cli(cli, "trace", str(tmp_path / "t.bvh"), "--scene", SCENE, "--rays", "primary",
                   "--count", "4096", "--seed", "3", "--layout", "bvh2")
