@@ -7,7 +7,11 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
+#include <climits>
+#include <cmath>
+#include <cstdint>
 #include <cstdarg>
 #include <cstdio>
 #include <cstdlib>
@@ -31,6 +35,32 @@ namespace bvhopt::bench {
 
 // ---- command line ----
 
+// Numbers on a bench's command line. The whole text must be the number, else an Error naming
+// the option and the text: std::stod and std::stoi alone report just "stod" or "stoi", and
+// read "3x" as 3.
+inline double parse_double(const std::string& text, const std::string& option) {
+  double v = 0.0;
+  const char* end = text.data() + text.size();
+  const auto [p, ec] = std::from_chars(text.data(), end, v);
+  if (ec != std::errc() || p != end || !std::isfinite(v))
+    throw Error("option " + option + ": '" + text + "' is not a finite number");
+  return v;
+}
+inline int64_t parse_integer(const std::string& text, const std::string& option, int64_t min, int64_t max) {
+  int64_t v = 0;
+  const char* end = text.data() + text.size();
+  const auto [p, ec] = std::from_chars(text.data(), end, v);
+  if (ec != std::errc() || p != end)
+    throw Error("option " + option + ": '" + text + "' is not a whole number");
+  if (v < min || v > max)
+    throw Error("option " + option + ": " + text + " is out of range (" + std::to_string(min) + " to " +
+                std::to_string(max) + ")");
+  return v;
+}
+inline int parse_int(const std::string& text, const std::string& option) {
+  return int(parse_integer(text, option, INT_MIN, INT_MAX));
+}
+
 // Walks argv for a bench's option loop. Each program keeps its own option table; what is
 // common is fetching an option's value and failing, named after the program, when it is
 // missing.
@@ -52,6 +82,11 @@ class Args {
     if (i_ + 1 >= argc_) throw Error(program_ + ": option " + current_ + " needs a value");
     return argv_[++i_];
   }
+  // The value as a number (see parse_double, parse_integer).
+  double double_value() { return parse_double(value(), current_); }
+  int int_value() { return parse_int(value(), current_); }
+  uint32_t u32_value() { return uint32_t(parse_integer(value(), current_, 0, UINT32_MAX)); }
+  uint64_t u64_value() { return uint64_t(parse_integer(value(), current_, 0, INT64_MAX)); }
 
  private:
   int argc_;

@@ -112,10 +112,10 @@ Options parse(int argc, char** argv) {
     if (read_scene_option(args, o.scenes)) continue;
     if (a == "--no-embree") o.embree = false;
     else if (a == "--json") o.json_path = args.value();
-    else if (a == "--runs") o.runs = std::max(1, std::stoi(args.value()));
+    else if (a == "--runs") o.runs = std::max(1, args.int_value());
     else if (a == "--threads") {
       o.threads.clear();
-      for (auto& t : split_list(args.value())) o.threads.push_back(std::max(1, std::stoi(t)));
+      for (auto& t : split_list(args.value())) o.threads.push_back(std::max(1, parse_int(t, a)));
     } else if (a == "--builders") {
       o.builders.clear();
       for (auto& b : split_list(args.value())) {

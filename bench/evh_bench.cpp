@@ -78,10 +78,10 @@ Options parse(int argc, char** argv) {
     else if (a == "--no-fig4") o.fig4 = false;
     else if (a == "--no-fig5") o.fig5 = false;
     else if (a == "--no-table") o.table = false;
-    else if (a == "--rays") o.rays = std::stoull(args.value()), rays_set = true;
-    else if (a == "--repeats") o.repeats = std::max(1, std::stoi(args.value())), repeats_set = true;
-    else if (a == "--leaf") o.leaf = static_cast<uint32_t>(std::max(1, std::stoi(args.value())));
-    else if (a == "--t") o.t = std::stoi(args.value());
+    else if (a == "--rays") o.rays = args.u64_value(), rays_set = true;
+    else if (a == "--repeats") o.repeats = std::max(1, args.int_value()), repeats_set = true;
+    else if (a == "--leaf") o.leaf = std::max(1u, args.u32_value());
+    else if (a == "--t") o.t = args.int_value();
     else if (a == "--help" || a == "-h") {
       std::cout << "evh_bench [--scenes DIR] [--scene FILE]... [--json FILE] [--quick]\n"
                    "          [--rays N] [--repeats R] [--leaf L] [--t T] [--fig5-scene FILE]\n"

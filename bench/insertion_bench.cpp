@@ -117,10 +117,10 @@ Options parse(int argc, char** argv) {
   while (args.next()) {
     const std::string& a = args.current();
     if (read_scene_option(args, opt.scenes)) continue;
-    if (a == "--runs") opt.runs = std::max(1, std::atoi(args.value().c_str()));
-    else if (a == "--max-passes") opt.max_passes = static_cast<uint32_t>(std::atoi(args.value().c_str()));
-    else if (a == "--time-limit") opt.time_limit = std::atof(args.value().c_str());
-    else if (a == "--stop-after") opt.stop_after = static_cast<uint32_t>(std::atoi(args.value().c_str()));
+    if (a == "--runs") opt.runs = std::max(1, args.int_value());
+    else if (a == "--max-passes") opt.max_passes = args.u32_value();
+    else if (a == "--time-limit") opt.time_limit = args.double_value();
+    else if (a == "--stop-after") opt.stop_after = args.u32_value();
     else if (a == "--json") opt.json_path = args.value();
     else if (a == "--no-sequential") opt.sequential = false;
     else if (a == "--no-median") opt.median_start = false;

@@ -57,17 +57,17 @@ Options parse(int argc, char** argv) {
   while (args.next()) {
     const std::string& a = args.current();
     if (read_scene_option(args, o.scenes)) continue;
-    if (a == "--runs") o.runs = std::max(1, std::stoi(args.value()));
-    else if (a == "--schedule-passes") o.schedule_passes = std::stoul(args.value());
+    if (a == "--runs") o.runs = std::max(1, args.int_value());
+    else if (a == "--schedule-passes") o.schedule_passes = args.u64_value();
     else if (a == "--no-anneal") o.anneal = false;
     else if (a == "--no-nonzero-variant") o.nonzero_variant = false;
     else if (a == "--json") o.json_path = args.value();
     else if (a == "--h") {
       o.hs.clear();
-      for (auto& h : split_list(args.value())) o.hs.push_back(std::stod(h));
+      for (auto& h : split_list(args.value())) o.hs.push_back(parse_double(h, a));
     } else if (a == "--anneal-threads") {
       o.anneal_threads.clear();
-      for (auto& t : split_list(args.value())) o.anneal_threads.push_back(std::max(1, std::stoi(t)));
+      for (auto& t : split_list(args.value())) o.anneal_threads.push_back(std::max(1, parse_int(t, a)));
     } else if (a == "--help" || a == "-h") {
       std::cout << "rotations_bench [--scenes DIR] [--scene SPEC]... [--no-builtin] [--builtin SPEC] [--runs 3]\n"
                    "                [--h 1.0[,1.5,...]] [--schedule-passes 1250] [--anneal-threads 1,2]\n"

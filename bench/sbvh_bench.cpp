@@ -115,28 +115,28 @@ Options parse(int argc, char** argv) {
   while (args.next()) {
     const std::string& a = args.current();
     if (read_scene_option(args, o.scenes)) continue;
-    if (a == "--runs") o.runs = std::max(1, std::stoi(args.value()));
-    else if (a == "--threads") o.threads = std::max(1, std::stoi(args.value()));
-    else if (a == "--budget") o.budget = std::stod(args.value());
-    else if (a == "--alpha") o.alpha = std::stod(args.value());
-    else if (a == "--node-alpha") o.node_alpha = std::stod(args.value());
-    else if (a == "--spatial-bins") o.spatial_bins = uint32_t(std::stoul(args.value()));
-    else if (a == "--embree-budget") o.embree_budget = std::stod(args.value());
-    else if (a == "--opt-seconds") o.opt_seconds = std::stod(args.value());
+    if (a == "--runs") o.runs = std::max(1, args.int_value());
+    else if (a == "--threads") o.threads = std::max(1, args.int_value());
+    else if (a == "--budget") o.budget = args.double_value();
+    else if (a == "--alpha") o.alpha = args.double_value();
+    else if (a == "--node-alpha") o.node_alpha = args.double_value();
+    else if (a == "--spatial-bins") o.spatial_bins = args.u32_value();
+    else if (a == "--embree-budget") o.embree_budget = args.double_value();
+    else if (a == "--opt-seconds") o.opt_seconds = args.double_value();
     else if (a == "--no-embree") o.embree = false;
     else if (a == "--compare") o.compare = true;
-    else if (a == "--c-t") o.cost.traversal = std::stod(args.value());
-    else if (a == "--c-i") o.cost.intersection = std::stod(args.value());
-    else if (a == "--rays") o.rays = std::stoull(args.value());
-    else if (a == "--ray-passes") o.ray_passes = std::max(1, std::stoi(args.value()));
-    else if (a == "--ray-threads") o.ray_threads = std::max(1, std::stoi(args.value()));
+    else if (a == "--c-t") o.cost.traversal = args.double_value();
+    else if (a == "--c-i") o.cost.intersection = args.double_value();
+    else if (a == "--rays") o.rays = args.u64_value();
+    else if (a == "--ray-passes") o.ray_passes = std::max(1, args.int_value());
+    else if (a == "--ray-threads") o.ray_threads = std::max(1, args.int_value());
     else if (a == "--wide-block") {
-      o.wide_block = std::stod(args.value());
+      o.wide_block = args.double_value();
       if (!(o.wide_block > 0.0)) throw Error("--wide-block takes a positive cost");
     }
     else if (a == "--rotate") {
       o.rotations.clear();
-      for (auto& r : split_list(args.value())) o.rotations.push_back(std::stof(r));
+      for (auto& r : split_list(args.value())) o.rotations.push_back(float(parse_double(r, a)));
     } else if (a == "--json") o.json_path = args.value();
     else if (a == "--help" || a == "-h") {
       std::cout << "sbvh_bench [--scenes DIR] [--scene FILE]... [--runs 5] [--threads 2] [--budget 1.3] [--alpha 1e-5]\n"

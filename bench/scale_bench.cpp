@@ -133,18 +133,18 @@ Options parse(int argc, char** argv) {
     if (a == "--scene") {
       opt.scenes.push_back(args.value());
     } else if (a == "--threads") {
-      opt.threads = std::max(1, std::atoi(args.value().c_str()));
+      opt.threads = std::max(1, args.int_value());
     } else if (a == "--budget") {
-      opt.budget = std::atof(args.value().c_str());
+      opt.budget = args.double_value();
     } else if (a == "--repeat") {
-      opt.repeat = std::max(1, std::atoi(args.value().c_str()));
+      opt.repeat = std::max(1, args.int_value());
     } else if (a == "--json") {
       opt.json_path = args.value();
     } else if (a == "--reference") {
       const std::string v = args.value();
       const size_t eq = v.rfind('=');
       if (eq == std::string::npos) throw Error("scale_bench: --reference wants SPEC=COST");
-      opt.references[v.substr(0, eq)] = std::atof(v.c_str() + eq + 1);
+      opt.references[v.substr(0, eq)] = parse_double(v.substr(eq + 1), a);
     } else {
       throw Error("scale_bench: unknown option " + a);
     }

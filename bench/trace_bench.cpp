@@ -110,8 +110,8 @@ Options parse(int argc, char** argv) {
   while (args.next()) {
     const std::string& a = args.current();
     if (read_scene_option(args, o.scene_options)) continue;
-    if (a == "--count") o.count = std::stoull(args.value());
-    else if (a == "--repeats") o.repeats = std::max(1, std::stoi(args.value()));
+    if (a == "--count") o.count = args.u64_value();
+    else if (a == "--repeats") o.repeats = std::max(1, args.int_value());
     else if (a == "--json") o.json_path = args.value();
     else if (a == "--optimizers") o.optimizers = true;
     else if (a == "--quick") o.quick = true;
@@ -120,16 +120,16 @@ Options parse(int argc, char** argv) {
     else if (a == "--block-costs") {
       o.block_costs.clear();
       for (const std::string& c : split_list(args.value())) {
-        const double v = std::stod(c);
+        const double v = parse_double(c, a);
         if (!(v > 0.0)) throw Error("--block-costs takes positive costs, got '" + c + "'");
         o.block_costs.push_back(v);
       }
     }
     else if (a == "--fit-costs") o.fit_costs = true;
     else if (a == "--wall") o.wall = true;
-    else if (a == "--opt-seconds") o.opt_seconds = std::stod(args.value());
-    else if (a == "--best-seconds") o.best_seconds = std::stod(args.value());
-    else if (a == "--best-leaf") o.best_leaf = static_cast<uint32_t>(std::stoul(args.value()));
+    else if (a == "--opt-seconds") o.opt_seconds = args.double_value();
+    else if (a == "--best-seconds") o.best_seconds = args.double_value();
+    else if (a == "--best-leaf") o.best_leaf = args.u32_value();
     else if (a == "--baked") o.baked_dir = args.value();
     else if (a == "--kinds") {
       o.kinds.clear();

@@ -65,5 +65,33 @@ TEST_F(BenchScenes, PicksAreCheckedBeforeTheFolderIsListed) {
   EXPECT_EQ(e.rfind((dir_ / "gone.obj").string() + ": scene file not found", 0), 0u) << e;
 }
 
+// A bench's numbers: the whole text is the number, or the error names the option and the
+// text (std::stoi read "3x" as 3, std::atoi "abc" as 0).
+TEST(BenchArgs, NumbersAreWholeAndBadOnesAreNamed) {
+  EXPECT_EQ(parse_double("0.25", "--wide-block"), 0.25);
+  EXPECT_EQ(parse_double("-1e3", "--x"), -1000.0);
+  EXPECT_EQ(parse_int("-7", "--t"), -7);
+  EXPECT_EQ(parse_integer("4000000000", "--rays", 0, INT64_MAX), 4000000000);
+  for (const char* bad : {"", "abc", "3x", "1.5.2", " 2", "nan", "inf", "1e999"}) {
+    const std::string e = error_of([&] { parse_double(bad, "--wide-block"); });
+    EXPECT_EQ(e, "option --wide-block: '" + std::string(bad) + "' is not a finite number") << bad;
+  }
+  for (const char* bad : {"", "abc", "3x", "2.5", "99999999999999999999"}) {
+    const std::string e = error_of([&] { parse_int(bad, "--runs"); });
+    EXPECT_EQ(e, "option --runs: '" + std::string(bad) + "' is not a whole number") << bad;
+  }
+  EXPECT_EQ(error_of([&] { parse_integer("-1", "--count", 0, 10); }), "option --count: -1 is out of range (0 to 10)");
+  EXPECT_EQ(error_of([&] { parse_int("3000000000", "--runs"); }).rfind("option --runs: 3000000000 is out of range", 0), 0u);
+  // Through Args, as the benches read them: the option is the one being read.
+  const char* argv[] = {"x_bench", "--repeats", "5", "--count", "-3", "--c-t", "three"};
+  Args args(7, const_cast<char**>(argv), "x_bench");
+  ASSERT_TRUE(args.next());
+  EXPECT_EQ(args.int_value(), 5);
+  ASSERT_TRUE(args.next());
+  EXPECT_EQ(error_of([&] { args.u64_value(); }).rfind("option --count: -3 is out of range", 0), 0u);
+  ASSERT_TRUE(args.next());
+  EXPECT_EQ(error_of([&] { args.double_value(); }), "option --c-t: 'three' is not a finite number");
+}
+
 }  // namespace
 }  // namespace bvhopt::bench
