@@ -105,6 +105,18 @@ inline std::vector<std::string> split_list(const std::string& s) {
   return out;
 }
 
+// A comma-separated list of costs above 0 (c_blk values, say), at least one.
+inline std::vector<double> parse_positive_list(const std::string& text, const std::string& option) {
+  std::vector<double> out;
+  for (const std::string& c : split_list(text)) {
+    const double v = parse_double(c, option);
+    if (!(v > 0.0)) throw Error("option " + option + " takes costs above 0, got '" + c + "'");
+    out.push_back(v);
+  }
+  if (out.empty()) throw Error("option " + option + " needs at least one cost");
+  return out;
+}
+
 // ---- scenes ----
 
 // The scenes folder when --scenes is not given: $BVHOPT_SCENES if set and not empty, else

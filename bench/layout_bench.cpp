@@ -60,15 +60,8 @@ Options parse(int argc, char** argv) {
     else if (a == "--width") o.width = args.u32_value();
     else if (a == "--leaf") o.leaf = args.u32_value();
     else if (a == "--json") o.json_path = args.value();
-    else if (a == "--wide-block") {
-      o.block_costs.clear();
-      for (const std::string& c : split_list(args.value())) {
-        const double v = parse_double(c, a);
-        if (!(v > 0.0)) throw Error("option --wide-block takes costs above 0, got '" + c + "'");
-        o.block_costs.push_back(v);
-      }
-      if (o.block_costs.empty()) throw Error("option --wide-block needs at least one cost");
-    } else if (a == "--threads") {
+    else if (a == "--wide-block") o.block_costs = parse_positive_list(args.value(), a);
+    else if (a == "--threads") {
       o.threads.clear();
       for (const std::string& t : split_list(args.value())) o.threads.push_back(std::max(1, parse_int(t, a)));
     } else if (a == "--help" || a == "-h") {

@@ -117,14 +117,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--quick") o.quick = true;
     else if (a == "--no-wide") o.wide = false;
     else if (a == "--wide-variants") o.wide_variants = true;
-    else if (a == "--block-costs") {
-      o.block_costs.clear();
-      for (const std::string& c : split_list(args.value())) {
-        const double v = parse_double(c, a);
-        if (!(v > 0.0)) throw Error("--block-costs takes positive costs, got '" + c + "'");
-        o.block_costs.push_back(v);
-      }
-    }
+    else if (a == "--block-costs") o.block_costs = parse_positive_list(args.value(), a);
     else if (a == "--fit-costs") o.fit_costs = true;
     else if (a == "--wall") o.wall = true;
     else if (a == "--opt-seconds") o.opt_seconds = args.double_value();

@@ -82,6 +82,10 @@ TEST(BenchArgs, NumbersAreWholeAndBadOnesAreNamed) {
   }
   EXPECT_EQ(error_of([&] { parse_integer("-1", "--count", 0, 10); }), "option --count: -1 is out of range (0 to 10)");
   EXPECT_EQ(error_of([&] { parse_int("3000000000", "--runs"); }).rfind("option --runs: 3000000000 is out of range", 0), 0u);
+  EXPECT_EQ(parse_positive_list("0.25,0.5", "--wide-block"), (std::vector<double>{0.25, 0.5}));
+  EXPECT_EQ(error_of([&] { parse_positive_list("0.25,0", "--wide-block"); }),
+            "option --wide-block takes costs above 0, got '0'");
+  EXPECT_EQ(error_of([&] { parse_positive_list(",", "--wide-block"); }), "option --wide-block needs at least one cost");
   // Through Args, as the benches read them: the option is the one being read.
   const char* argv[] = {"x_bench", "--repeats", "5", "--count", "-3", "--c-t", "three"};
   Args args(7, const_cast<char**>(argv), "x_bench");
