@@ -10,8 +10,8 @@
 #include <vector>
 
 #include "bvhopt/any_tracer.h"
-#include "bvhopt/wide_bvh.h"
 #include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/wide_bvh.h"
 
 namespace bvhopt {
 
