@@ -52,16 +52,6 @@ struct WideCostOption {
   WideCostModel model() const { return {WideCostModel{}.node, block}; }
 };
 
-// The wide tracer of a bvh4 / bvh8 layout (null for bvh2).
-inline std::unique_ptr<WideTracer> make_wide_tracer(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout,
-                                                    const WideCostModel& cost = {}) {
-  if (layout == TraceLayout::bvh2) return nullptr;
-  WideTracerOptions o;
-  o.layout.collapse.width = uint32_t(layout);
-  o.layout.collapse.cost = cost;
-  return std::make_unique<WideTracer>(flat, mesh, o);
-}
-
 struct LoadedTree {
   BvhFileInfo info;
   double sah = 0.0;

@@ -217,11 +217,7 @@ Tracer make_tracer(const Bvh& bvh, const PrimitiveRefs& refs, const Mesh& mesh) 
 
 // The wide tracer of the configured layout and collapse cost (none for bvh2).
 std::unique_ptr<WideTracer> make_wide(const FlatBvh& flat, const Mesh& mesh, const ExperimentConfig& c) {
-  if (c.layout == TraceLayout::bvh2) return nullptr;
-  WideTracerOptions o;
-  o.layout.collapse.width = uint32_t(c.layout);
-  o.layout.collapse.cost = c.wide_cost;
-  return std::make_unique<WideTracer>(flat, mesh, o);
+  return make_wide_tracer(flat, mesh, c.layout, c.wide_cost);
 }
 
 // Every tree of a scene traced on the same ray sets. Deterministic figures (traversal steps,

@@ -4,6 +4,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string_view>
 
@@ -21,6 +22,11 @@ enum class TraceLayout : uint8_t { bvh2 = 0, bvh4 = 4, bvh8 = 8 };
 inline constexpr TraceLayout kDefaultTraceLayout = TraceLayout::bvh8;
 std::string_view trace_layout_name(TraceLayout layout);  // "bvh2", "bvh4", "bvh8"
 std::optional<TraceLayout> parse_trace_layout(std::string_view name);
+
+// The wide tracer of a bvh4 / bvh8 layout collapsed under `cost`, null for bvh2: what the
+// command line's --layout and --wide-block, the experiment and Python's trace() ask for.
+std::unique_ptr<WideTracer> make_wide_tracer(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout,
+                                             const WideCostModel& cost = {});
 
 // Non-owning: the tracer must outlive the handle.
 class AnyTracer {

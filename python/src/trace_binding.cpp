@@ -90,10 +90,9 @@ TraceResult trace(const Tree& tree, const Scene& scene, const py::array_t<float,
     // bvh4 / bvh8: collapsed and laid out from the binary tree, as the command line's --layout.
     std::unique_ptr<WideTracer> wide_tracer;
     if (*wide != TraceLayout::bvh2) {
-      WideTracerOptions o;
-      o.layout.collapse.width = uint32_t(*wide);
-      if (wide_block) o.layout.collapse.cost.block = *wide_block;
-      wide_tracer = std::make_unique<WideTracer>(finalize(tree.bvh, tree.refs), scene.mesh, o);
+      WideCostModel cost;
+      if (wide_block) cost.block = *wide_block;
+      wide_tracer = make_wide_tracer(finalize(tree.bvh, tree.refs), scene.mesh, *wide, cost);
     }
     const AnyTracer tracer = wide_tracer ? AnyTracer(*wide_tracer) : AnyTracer(*binary, options.order);
     trace_rays(tracer, rays, q, hits, &counters);

@@ -21,6 +21,15 @@ std::optional<TraceLayout> parse_trace_layout(std::string_view name) {
   return std::nullopt;
 }
 
+std::unique_ptr<WideTracer> make_wide_tracer(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout,
+                                             const WideCostModel& cost) {
+  if (layout == TraceLayout::bvh2) return nullptr;
+  WideTracerOptions o;
+  o.layout.collapse.width = uint32_t(layout);
+  o.layout.collapse.cost = cost;
+  return std::make_unique<WideTracer>(flat, mesh, o);
+}
+
 Hit AnyTracer::closest(const Ray& ray, TraceCounters& counters) const {
   return wide_ ? wide_->closest(ray, counters) : binary_->closest(ray, counters, order_);
 }
