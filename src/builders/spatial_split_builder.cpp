@@ -5,9 +5,16 @@
 #include <tbb/parallel_reduce.h>
 #include <tbb/task_group.h>
 
+// SSE2 is part of x86-64; elsewhere the object binning runs axis by axis.
+#if defined(__SSE2__) || defined(_M_X64)
+#include <emmintrin.h>
+#define BVHOPT_SBVH_SSE 1
+#endif
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstddef>
 #include <limits>
 #include <memory>
 #include <new>
@@ -30,6 +37,8 @@ struct SRef {
   Box box;
   uint32_t tri;
 };
+// ObjectMapping::add loads box.max as four floats, the fourth being tri.
+static_assert(sizeof(Box) == 24 && offsetof(SRef, tri) == sizeof(Box));
 
 // What a node receives from its parent: its box and the bounds of its references' centres.
 struct NodeState {
@@ -51,22 +60,34 @@ struct Task {
 float overlap_area(const Box& a, const Box& b) { return intersect(a, b).area(); }
 
 // A bin's box without a constructor, so that a node's bins cost only the n it uses (the
-// arrays hold room for kMaxBins; small nodes use a few).
-struct BinBox {
-  Vec3 min, max;
+// arrays hold room for kMaxBins; small nodes use a few). Four lanes (x, y, z and one
+// unused): a reference extends it by two vector operations instead of six scalar ones, and
+// binning is the build's most frequent loop, run at every node over all of its references.
+struct alignas(16) BinBox {
+  float min[4], max[4];
   void clear() {
-    min = Vec3(std::numeric_limits<float>::infinity());
-    max = Vec3(-std::numeric_limits<float>::infinity());
-  }
-  void extend(const Box& b) {
-    min = bvhopt::min(min, b.min);
-    max = bvhopt::max(max, b.max);
+    for (int a = 0; a < 4; ++a) min[a] = std::numeric_limits<float>::infinity();
+    for (int a = 0; a < 4; ++a) max[a] = -std::numeric_limits<float>::infinity();
   }
   void extend(const BinBox& b) {
-    min = bvhopt::min(min, b.min);
-    max = bvhopt::max(max, b.max);
+    for (int a = 0; a < 4; ++a) min[a] = std::min(min[a], b.min[a]);
+    for (int a = 0; a < 4; ++a) max[a] = std::max(max[a], b.max[a]);
   }
-  Box box() const { return Box(min, max); }
+  // The reference's box.
+  void extend(const SRef& r) {
+#ifdef BVHOPT_SBVH_SSE
+    // Lanes x, y, z of min and max; the fourth holds the next field (max.x, then the
+    // reference's triangle id), which box() never reads. The new value first: SSE's min
+    // returns its second operand on a tie, as std::min(acc, new) returns acc (the sign of
+    // a zero stays the scalar code's).
+    _mm_store_ps(min, _mm_min_ps(_mm_loadu_ps(&r.box.min.x), _mm_load_ps(min)));
+    _mm_store_ps(max, _mm_max_ps(_mm_loadu_ps(&r.box.max.x), _mm_load_ps(max)));
+#else
+    for (int a = 0; a < 3; ++a) min[a] = std::min(min[a], r.box.min[a]);
+    for (int a = 0; a < 3; ++a) max[a] = std::max(max[a], r.box.max[a]);
+#endif
+  }
+  Box box() const { return Box(Vec3(min[0], min[1], min[2]), Vec3(max[0], max[1], max[2])); }
 };
 
 // ---- Object split: centres binned per axis over the node's centre bounds.
@@ -93,7 +114,7 @@ struct ObjectBins {
 };
 
 struct ObjectMapping {
-  float origin[3], scale[3];
+  float origin[4] = {}, scale[4] = {};  // the fourth lane for add()'s loads
   uint32_t last;
   ObjectMapping(const Box& centres, uint32_t bins) : last(bins - 1) {
     for (int a = 0; a < 3; ++a) {
@@ -106,9 +127,41 @@ struct ObjectMapping {
     }
   }
   uint32_t bin(const Box& b, int a) const { return bin_of_centre(b.center()[a], a); }
+  // Clamped in float, then truncated: the arithmetic of add() below lane for lane (SSE's
+  // max returns its second operand for a NaN), so the binning and the partition agree.
   uint32_t bin_of_centre(float c, int a) const {
-    const int k = static_cast<int>((c - origin[a]) * scale[a]);
-    return static_cast<uint32_t>(std::clamp(k, 0, static_cast<int>(last)));
+    float x = (c - origin[a]) * scale[a];
+    x = x > 0.0f ? x : 0.0f;
+    x = x < float(last) ? x : float(last);
+    return static_cast<uint32_t>(x);
+  }
+  // Bins the reference's box on all three axes.
+  void add(ObjectBins& bins, const SRef& r) const {
+    const Box& b = r.box;
+#ifdef BVHOPT_SBVH_SSE
+    // Lanes x, y, z of min and max; the fourth holds the next field (max.x, then the
+    // reference's triangle id), which no bin box reads.
+    const __m128 lo = _mm_loadu_ps(&b.min.x), hi = _mm_loadu_ps(&b.max.x);
+    const __m128 centre = _mm_mul_ps(_mm_add_ps(lo, hi), _mm_set1_ps(0.5f));
+    __m128 x = _mm_mul_ps(_mm_sub_ps(centre, _mm_loadu_ps(origin)), _mm_loadu_ps(scale));
+    x = _mm_min_ps(_mm_max_ps(x, _mm_setzero_ps()), _mm_set1_ps(float(last)));
+    const __m128i k = _mm_cvttps_epi32(x);
+    const uint32_t k0 = uint32_t(_mm_cvtsi128_si32(k)), k1 = uint32_t(_mm_cvtsi128_si32(_mm_shuffle_epi32(k, 0x55))),
+                   k2 = uint32_t(_mm_cvtsi128_si32(_mm_shuffle_epi32(k, 0xAA)));
+    const uint32_t ks[3] = {k0, k1, k2};
+    for (int a = 0; a < 3; ++a) {
+      BinBox& bin = bins.box[a][ks[a]];
+      _mm_store_ps(bin.min, _mm_min_ps(lo, _mm_load_ps(bin.min)));
+      _mm_store_ps(bin.max, _mm_max_ps(hi, _mm_load_ps(bin.max)));
+      bins.count[a][ks[a]]++;
+    }
+#else
+    for (int a = 0; a < 3; ++a) {
+      const uint32_t k = bin(b, a);
+      bins.box[a][k].extend(r);
+      bins.count[a][k]++;
+    }
+#endif
   }
 };
 
@@ -199,6 +252,33 @@ struct Sides {
     r.box.extend(o.r.box), r.centres.extend(o.r.centres);
   }
 };
+
+// The bounds of n references' boxes and of their centres, as Box::extend would give them.
+NodeState bounds_of(const SRef* refs, size_t n) {
+  NodeState b;
+#ifdef BVHOPT_SBVH_SSE
+  // Four running bounds in registers, no branch (lanes as in BinBox::extend(const SRef&)).
+  __m128 lo = _mm_set1_ps(std::numeric_limits<float>::infinity()), hi = _mm_sub_ps(_mm_setzero_ps(), lo);
+  __m128 clo = lo, chi = hi;
+  const __m128 half = _mm_set1_ps(0.5f);
+  for (size_t i = 0; i < n; ++i) {
+    const __m128 l = _mm_loadu_ps(&refs[i].box.min.x), h = _mm_loadu_ps(&refs[i].box.max.x);
+    const __m128 c = _mm_mul_ps(_mm_add_ps(l, h), half);
+    lo = _mm_min_ps(l, lo), hi = _mm_max_ps(h, hi);
+    clo = _mm_min_ps(c, clo), chi = _mm_max_ps(c, chi);
+  }
+  alignas(16) float out[4][4];
+  _mm_store_ps(out[0], lo), _mm_store_ps(out[1], hi), _mm_store_ps(out[2], clo), _mm_store_ps(out[3], chi);
+  b.box = Box(Vec3(out[0][0], out[0][1], out[0][2]), Vec3(out[1][0], out[1][1], out[1][2]));
+  b.centres = Box(Vec3(out[2][0], out[2][1], out[2][2]), Vec3(out[3][0], out[3][1], out[3][2]));
+#else
+  for (size_t i = 0; i < n; ++i) {
+    b.box.extend(refs[i].box);
+    b.centres.extend(refs[i].box.center());
+  }
+#endif
+  return b;
+}
 
 // A partition's scratch: each reference's pieces and sides, and each block's counts.
 struct PartitionScratch {
@@ -489,14 +569,7 @@ class SpatialSplitBuilder {
     ObjectBins& bins = *storage;
     bins.reset(nb);
     reduce(t, bins, [&](ObjectBins& acc, size_t b, size_t e) {
-      for (size_t i = b; i < e; ++i) {
-        const Box& box = slots_[i].box;
-        for (int a = 0; a < 3; ++a) {
-          const uint32_t k = m.bin(box, a);
-          acc.box[a][k].extend(box);
-          acc.count[a][k]++;
-        }
-      }
+      for (size_t i = b; i < e; ++i) m.add(acc, slots_[i]);
     });
     Split best;
     best.kind = Split::object;
@@ -644,7 +717,7 @@ class SpatialSplitBuilder {
       last = enter + k;
     }
     if (first == kMaxBins) {  // no piece inside the reference's box: count it whole
-      bins.box[a][enter].extend(r.box);
+      bins.box[a][enter].extend(r);
       first = last = enter;
     }
     bins.enter[a][first]++;
@@ -668,7 +741,7 @@ class SpatialSplitBuilder {
           enter[a] = m.enter_bin(a, r.box.min[a]);
           exit[a] = std::max(enter[a], m.exit_bin(a, r.box.max[a]));
           if (enter[a] == exit[a]) {
-            acc.box[a][enter[a]].extend(r.box);
+            acc.box[a][enter[a]].extend(r);
             acc.enter[a][enter[a]]++;
             acc.exit[a][exit[a]]++;
           } else {
@@ -880,21 +953,24 @@ class SpatialSplitBuilder {
     Sides total;
     SRef unused;
     const bool object = s.kind == Split::object;  // the common case, without classify()'s dispatch
+    // Without a branch on the side, which is as good as random within a node: the reference
+    // is written to both places and only its side's count moves on (writing to `to` at
+    // total.left <= i overwrites nothing unread). The sides' bounds come after, from the
+    // packed runs.
     for (size_t i = 0; i < t.count; ++i) {
-      const SRef ref = node[i];
-      const Vec3 c = ref.box.center();
-      const bool left = object ? om.bin_of_centre(c[s.axis], s.axis) < s.bin
+      // Read in place, not copied: a copy went to the stack as two overlapping stores, and
+      // loading it back waited for both (a quarter of the partition's time). `to` reaches
+      // node[i] at most, where the reference is copied onto itself.
+      const SRef& ref = node[i];
+      const bool left = object ? om.bin_of_centre(ref.box.center()[s.axis], s.axis) < s.bin
                                : (classify(s, nullptr, &om, i, ref, unused, unused, total) & kLeft) != 0;
-      if (left) {
-        to[total.left++] = ref;
-        total.l.box.extend(ref.box);
-        total.l.centres.extend(c);
-      } else {
-        rs[total.right++] = ref;
-        total.r.box.extend(ref.box);
-        total.r.centres.extend(c);
-      }
+      to[total.left] = ref;
+      rs[total.right] = ref;
+      total.left += left ? 1 : 0;
+      total.right += left ? 0 : 1;
     }
+    total.l = bounds_of(to, total.left);
+    total.r = bounds_of(rs, total.right);
     if (total.left == 0 || total.right == 0) {  // put back as they were
       SRef* back = slots_.get() + t.begin;
       if (total.left == 0)
