@@ -611,6 +611,18 @@ TEST(SpatialSplit, SameTreeOnOneAndTwoThreadsAndAnArenaOfEight) {
   ASSERT_GT(one.stats.spatial_splits, 0u);
   expect_same(one, two, "1 vs 2 threads");
   expect_same(one, eight, "1 thread vs arena of 8");
+  // The counts, summed over the threads that made the splits: one split per inner node, and
+  // the same counts whatever the threads.
+  size_t inner = 0;
+  for (const BvhNode& n : one.bvh.nodes) inner += n.is_leaf() ? 0 : 1;
+  EXPECT_EQ(one.stats.spatial_splits + one.stats.object_splits, inner);
+  for (const SpatialSplitResult* other : {&two, &eight}) {
+    EXPECT_EQ(other->stats.spatial_splits, one.stats.spatial_splits);
+    EXPECT_EQ(other->stats.object_splits, one.stats.object_splits);
+    EXPECT_EQ(other->stats.split_references, one.stats.split_references);
+    EXPECT_EQ(other->stats.unsplit_references, one.stats.unsplit_references);
+  }
+  EXPECT_GT(one.stats.split_references, 0u);
 }
 
 TEST(SpatialSplit, SplitsLowerTheCostOfCrossingTriangles) {

@@ -1,5 +1,6 @@
 #include "bvhopt/spatial_split_builder.h"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
@@ -12,7 +13,6 @@
 #endif
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <limits>
@@ -354,10 +354,12 @@ class SpatialSplitBuilder {
     s.input_references = n;
     s.references = out_.refs.size();
     s.budget = capacity_;
-    s.spatial_splits = spatial_splits_.load();
-    s.object_splits = object_splits_.load();
-    s.split_references = cut_.load();
-    s.unsplit_references = unsplit_.load();
+    for (const SplitCounts& c : counts_) {
+      s.spatial_splits += c.spatial;
+      s.object_splits += c.object;
+      s.split_references += c.cut;
+      s.unsplit_references += c.unsplit;
+    }
   }
 
  private:
@@ -1002,9 +1004,10 @@ class SpatialSplitBuilder {
   }
 
   void finish_partition(const Task& t, const Split& s, const Sides& total, size_t left_room, Task& l, Task& r) {
-    (s.kind == Split::spatial ? spatial_splits_ : object_splits_).fetch_add(1, std::memory_order_relaxed);
-    cut_.fetch_add(total.cut, std::memory_order_relaxed);
-    unsplit_.fetch_add(total.unsplit, std::memory_order_relaxed);
+    SplitCounts& c = counts_.local();
+    ++(s.kind == Split::spatial ? c.spatial : c.object);
+    c.cut += total.cut;
+    c.unsplit += total.unsplit;
     l = Task{t.room, t.room, total.left, left_room, t.base + 1, t.base, total.l};
     r = Task{t.room + left_room, t.room + left_room, total.right, t.capacity - left_room,
              t.base + static_cast<uint32_t>(2 * left_room), t.base, total.r};
@@ -1115,7 +1118,12 @@ class SpatialSplitBuilder {
     std::unique_ptr<uint8_t[], FreeStorage> side;
   } parallel_scratch_;
   tbb::task_group tasks_;
-  std::atomic<size_t> spatial_splits_{0}, object_splits_{0}, cut_{0}, unsplit_{0};
+  // Per thread: shared atomic counters, three locked adds at every node from both threads,
+  // were an eighth of the partition's time.
+  struct alignas(64) SplitCounts {
+    size_t spatial = 0, object = 0, cut = 0, unsplit = 0;
+  };
+  tbb::enumerable_thread_specific<SplitCounts> counts_;
 };
 
 }  // namespace
