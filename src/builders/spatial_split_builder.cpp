@@ -60,16 +60,36 @@ struct Task {
 float overlap_area(const Box& a, const Box& b) { return intersect(a, b).area(); }
 
 // A bin's box without a constructor, so that a node's bins cost only the n it uses (the
-// arrays hold room for kMaxBins; small nodes use a few). Four lanes (x, y, z and one
-// unused): a reference extends it by two vector operations instead of six scalar ones, and
-// binning is the build's most frequent loop, run at every node over all of its references.
-struct alignas(16) BinBox {
+// arrays hold room for kMaxBins; small nodes use a few).
+struct BinBox {
+  Vec3 min, max;
+  void clear() {
+    min = Vec3(std::numeric_limits<float>::infinity());
+    max = Vec3(-std::numeric_limits<float>::infinity());
+  }
+  void extend(const Box& b) {
+    min = bvhopt::min(min, b.min);
+    max = bvhopt::max(max, b.max);
+  }
+  void extend(const BinBox& b) {
+    min = bvhopt::min(min, b.min);
+    max = bvhopt::max(max, b.max);
+  }
+  Box box() const { return Box(min, max); }
+};
+
+// An object bin's box in four lanes (x, y, z and one unused): a reference extends it by two
+// vector operations instead of six scalar ones, and object binning is the build's most
+// frequent loop, run at every node over all of its references. Spatial bins keep BinBox:
+// bin_crossing writes their lanes one at a time, and a vector load of a bin just written
+// so waits for those stores (armadillo's build, mostly spatial binning, took 8 % longer).
+struct alignas(16) ObjectBinBox {
   float min[4], max[4];
   void clear() {
     for (int a = 0; a < 4; ++a) min[a] = std::numeric_limits<float>::infinity();
     for (int a = 0; a < 4; ++a) max[a] = -std::numeric_limits<float>::infinity();
   }
-  void extend(const BinBox& b) {
+  void extend(const ObjectBinBox& b) {
     for (int a = 0; a < 4; ++a) min[a] = std::min(min[a], b.min[a]);
     for (int a = 0; a < 4; ++a) max[a] = std::max(max[a], b.max[a]);
   }
@@ -94,7 +114,7 @@ struct alignas(16) BinBox {
 
 struct ObjectBins {
   uint32_t n;
-  BinBox box[3][kMaxBins];
+  ObjectBinBox box[3][kMaxBins];
   uint32_t count[3][kMaxBins];
   explicit ObjectBins(uint32_t bins) { reset(bins); }
   void reset(uint32_t bins) {
@@ -150,7 +170,7 @@ struct ObjectMapping {
                    k2 = uint32_t(_mm_cvtsi128_si32(_mm_shuffle_epi32(k, 0xAA)));
     const uint32_t ks[3] = {k0, k1, k2};
     for (int a = 0; a < 3; ++a) {
-      BinBox& bin = bins.box[a][ks[a]];
+      ObjectBinBox& bin = bins.box[a][ks[a]];
       _mm_store_ps(bin.min, _mm_min_ps(lo, _mm_load_ps(bin.min)));
       _mm_store_ps(bin.max, _mm_max_ps(hi, _mm_load_ps(bin.max)));
       bins.count[a][ks[a]]++;
@@ -257,7 +277,7 @@ struct Sides {
 NodeState bounds_of(const SRef* refs, size_t n) {
   NodeState b;
 #ifdef BVHOPT_SBVH_SSE
-  // Four running bounds in registers, no branch (lanes as in BinBox::extend(const SRef&)).
+  // Four running bounds in registers, no branch (lanes as in ObjectBinBox::extend(const SRef&)).
   __m128 lo = _mm_set1_ps(std::numeric_limits<float>::infinity()), hi = _mm_sub_ps(_mm_setzero_ps(), lo);
   __m128 clo = lo, chi = hi;
   const __m128 half = _mm_set1_ps(0.5f);
@@ -279,6 +299,11 @@ NodeState bounds_of(const SRef* refs, size_t n) {
 #endif
   return b;
 }
+
+// What the splits of a task did, for SpatialSplitStats.
+struct alignas(64) SplitCounts {
+  size_t spatial = 0, object = 0, cut = 0, unsplit = 0;
+};
 
 // A partition's scratch: each reference's pieces and sides, and each block's counts.
 struct PartitionScratch {
@@ -366,8 +391,10 @@ class SpatialSplitBuilder {
   // The loop of TopDownTree::build, over tasks that carry their room for new references.
   // Nodes of fewer than parallel_threshold references are built by one task, packed.
   void build(Task t) {
+    SplitCounts counts;
     for (;;) {
       if (t.count < config_.parallel_threshold) {
+        add_counts(counts);
         build_packed(t);
         return;
       }
@@ -375,7 +402,8 @@ class SpatialSplitBuilder {
       node.parent = t.parent;
       node.set_box(t.state.box);
       Task l, r;
-      if (!split(t, node.area(), l, r)) {
+      if (!split(t, node.area(), l, r, counts)) {
+        add_counts(counts);
         make_leaf(node, t);
         return;
       }
@@ -406,6 +434,7 @@ class SpatialSplitBuilder {
     std::vector<Pending> pending;  // local: split() may wait in oneTBB and run another subtree here
     size_t cursor = t.room;        // first free slot
     uint32_t next_node = t.base;
+    SplitCounts counts;
     for (;;) {
       const uint32_t index = next_node++;
       t.base = index;
@@ -413,14 +442,17 @@ class SpatialSplitBuilder {
       node.parent = t.parent;
       node.set_box(t.state.box);
       Task l, r;
-      if (split(t, node.area(), l, r)) {
+      if (split(t, node.area(), l, r, counts)) {
         pending.push_back(Pending{r.begin, r.count, t.room + t.capacity, index, r.state});
         l.parent = index;
         t = l;
         continue;
       }
       cursor += make_leaf(node, t);
-      if (pending.empty()) return;
+      if (pending.empty()) {
+        add_counts(counts);
+        return;
+      }
       const Pending p = pending.back();
       pending.pop_back();
       work_[p.parent].make_inner(p.parent + 1, next_node);
@@ -719,7 +751,7 @@ class SpatialSplitBuilder {
       last = enter + k;
     }
     if (first == kMaxBins) {  // no piece inside the reference's box: count it whole
-      bins.box[a][enter].extend(r);
+      bins.box[a][enter].extend(r.box);
       first = last = enter;
     }
     bins.enter[a][first]++;
@@ -743,7 +775,7 @@ class SpatialSplitBuilder {
           enter[a] = m.enter_bin(a, r.box.min[a]);
           exit[a] = std::max(enter[a], m.exit_bin(a, r.box.max[a]));
           if (enter[a] == exit[a]) {
-            acc.box[a][enter[a]].extend(r);
+            acc.box[a][enter[a]].extend(r.box);
             acc.enter[a][enter[a]]++;
             acc.exit[a][exit[a]]++;
           } else {
@@ -771,7 +803,7 @@ class SpatialSplitBuilder {
   }
 
   // Chooses the node's split (false: make it a leaf) and partitions its references.
-  bool split(const Task& t, double node_area, Task& l, Task& r) {
+  bool split(const Task& t, double node_area, Task& l, Task& r, SplitCounts& counts) {
     if (t.count <= 1) return false;
     Split object = find_object_split(t);
     Split spatial;
@@ -783,10 +815,10 @@ class SpatialSplitBuilder {
     if (use_spatial || object.axis >= 0) {
       const Split& s = use_spatial ? spatial : object;
       if (detail::sah_prefers_leaf(config_, node_area, t.count, s.cost)) return false;
-      if (use_spatial && partition(t, spatial, l, r)) return true;
+      if (use_spatial && partition(t, spatial, l, r, counts)) return true;
       if (object.axis >= 0) {
         if (use_spatial && detail::sah_prefers_leaf(config_, node_area, t.count, object.cost)) return false;
-        partition(t, object, l, r);
+        partition(t, object, l, r, counts);
         return true;
       }
     }
@@ -798,7 +830,7 @@ class SpatialSplitBuilder {
     for (size_t i = 0; i < t.count; ++i) (i < halve.bin ? halve.left : halve.right).extend(s[i].box);
     halve.cost = halve.left.area() * float(halve.bin) + halve.right.area() * float(t.count - halve.bin);
     if (detail::sah_prefers_leaf(config_, node_area, t.count, halve.cost)) return false;
-    partition(t, halve, l, r);
+    partition(t, halve, l, r, counts);
     return true;
   }
 
@@ -856,8 +888,8 @@ class SpatialSplitBuilder {
   // block counts its sides; then, with the children's room known, the pieces are written
   // back, left ones from the node's first slot and right ones from the right child's.
   // False (nothing changed) when a side would be empty or the node's room too small.
-  bool partition(const Task& t, const Split& s, Task& l, Task& r) {
-    if (s.kind != Split::spatial && !parallel(t.count)) return partition_whole(t, s, l, r);
+  bool partition(const Task& t, const Split& s, Task& l, Task& r, SplitCounts& counts) {
+    if (s.kind != Split::spatial && !parallel(t.count)) return partition_whole(t, s, l, r, counts);
     const SpatialMapping m(t.state.box, spatial_bin_count(t.count));
     const ObjectMapping om(t.state.centres, object_bin_count(t.count));
     const size_t blocks = (t.count + kBlock - 1) / kBlock;
@@ -935,7 +967,7 @@ class SpatialSplitBuilder {
     else
       for (size_t b = 0; b < blocks; ++b) write_block(b);
 
-    finish_partition(t, s, total, left_room, l, r);
+    finish_partition(t, s, total, left_room, l, r, counts);
     return true;
   }
 
@@ -944,7 +976,7 @@ class SpatialSplitBuilder {
   // the right child's first slot. The same children, in the same order, as the two passes
   // above, without copying every reference out and back (on classroom and staircase the
   // partition was a quarter of the build, nearly all of it object splits).
-  bool partition_whole(const Task& t, const Split& s, Task& l, Task& r) {
+  bool partition_whole(const Task& t, const Split& s, Task& l, Task& r, SplitCounts& counts) {
     const ObjectMapping om(t.state.centres, object_bin_count(t.count));
     // Nothing here waits in oneTBB, so no other task runs on this thread meanwhile.
     thread_local std::vector<SRef> right_scratch;
@@ -983,7 +1015,7 @@ class SpatialSplitBuilder {
     }
     const size_t left_room = left_room_of(t, total);
     std::copy(rs, rs + total.right, to + left_room);
-    finish_partition(t, s, total, left_room, l, r);
+    finish_partition(t, s, total, left_room, l, r, counts);
     return true;
   }
 
@@ -1003,8 +1035,8 @@ class SpatialSplitBuilder {
     return total.left + std::min(spare, static_cast<size_t>(double(spare) * share));
   }
 
-  void finish_partition(const Task& t, const Split& s, const Sides& total, size_t left_room, Task& l, Task& r) {
-    SplitCounts& c = counts_.local();
+  void finish_partition(const Task& t, const Split& s, const Sides& total, size_t left_room, Task& l, Task& r,
+                        SplitCounts& c) {
     ++(s.kind == Split::spatial ? c.spatial : c.object);
     c.cut += total.cut;
     c.unsplit += total.unsplit;
@@ -1118,12 +1150,13 @@ class SpatialSplitBuilder {
     std::unique_ptr<uint8_t[], FreeStorage> side;
   } parallel_scratch_;
   tbb::task_group tasks_;
-  // Per thread: shared atomic counters, three locked adds at every node from both threads,
-  // were an eighth of the partition's time.
-  struct alignas(64) SplitCounts {
-    size_t spatial = 0, object = 0, cut = 0, unsplit = 0;
-  };
+  // Per thread, added to once per task: shared atomic counters, three locked adds at every
+  // node from both threads, were an eighth of the partition's time.
   tbb::enumerable_thread_specific<SplitCounts> counts_;
+  void add_counts(const SplitCounts& c) {
+    SplitCounts& mine = counts_.local();
+    mine.spatial += c.spatial, mine.object += c.object, mine.cut += c.cut, mine.unsplit += c.unsplit;
+  }
 };
 
 }  // namespace
