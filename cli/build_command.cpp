@@ -32,32 +32,50 @@ struct BuildCommandOptions {
   bool json = false;
 };
 
-void print_build_summary(const BuildCommandOptions& opt, const Mesh& mesh, const PrimitiveRefs& refs,
+void print_build_summary(const BuildCommandOptions& opt, const Mesh& mesh, const BuiltTree& built,
                          const TreeStats& st, double load_s, double build_s, const std::string& evh_report) {
   const uint32_t leaf_size = opt.build.leaf.max_leaf_size;
+  const PrimitiveRefs& refs = built.refs;
+  const double per_triangle = mesh.triangle_count() ? double(refs.size()) / double(mesh.triangle_count()) : 0.0;
   if (opt.json) {
-    print_json({{"scene", mesh.name},
-                {"triangles", mesh.triangle_count()},
-                {"references", refs.size()},
-                {"builder", opt.builder},
-                {"leaf_size", leaf_size},
-                {"threads", opt.threads.effective()},
-                {"load_seconds", load_s},
-                {"build_seconds", build_s},
-                {"cost", st.cost},
-                {"ocost", st.ocost},
-                {"nodes", st.nodes},
-                {"leaves", st.leaves},
-                {"max_depth", st.max_depth},
-                {"output", opt.output}});
+    nlohmann::json out = {{"scene", mesh.name},
+                          {"triangles", mesh.triangle_count()},
+                          {"references", refs.size()},
+                          {"references_per_triangle", per_triangle},
+                          {"builder", opt.builder},
+                          {"leaf_size", leaf_size},
+                          {"threads", opt.threads.effective()},
+                          {"load_seconds", load_s},
+                          {"build_seconds", build_s},
+                          {"cost", st.cost},
+                          {"ocost", st.ocost},
+                          {"nodes", st.nodes},
+                          {"leaves", st.leaves},
+                          {"max_depth", st.max_depth},
+                          {"output", opt.output}};
+    if (const auto& s = built.spatial_split)
+      out["spatial_split"] = {{"budget_references", s->budget},
+                              {"spatial_splits", s->spatial_splits},
+                              {"object_splits", s->object_splits},
+                              {"split_references", s->split_references},
+                              {"unsplit_references", s->unsplit_references}};
+    print_json(out);
     return;
   }
+  std::string references = std::to_string(refs.size()) + " (" + format_double(per_triangle, 3) + " per triangle";
+  if (const auto& s = built.spatial_split)
+    references += ", budget " + std::to_string(s->budget) + "; " + std::to_string(s->spatial_splits) +
+                  " spatial and " + std::to_string(s->object_splits) + " object splits, " +
+                  std::to_string(s->split_references) + " references cut, " +
+                  std::to_string(s->unsplit_references) + " sent whole";
+  references += ")";
   std::cout << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles, loaded in "
             << format_double(load_s, 2) << " s)\n"
             << (opt.evh.enabled ? "evh        " + evh_report + "\n" : std::string())
             << "builder    " << opt.builder << ", leaf size " << leaf_size << ", " << opt.threads.effective()
             << " threads\n"
             << "build      " << format_double(build_s * 1e3, 1) << " ms\n"
+            << "references " << references << "\n"
             << "cost       " << format_double(st.cost, 3) << "  (ocost " << format_double(st.ocost, 3) << ")\n"
             << "nodes      " << st.nodes << " (" << st.leaves << " leaves), depth " << st.max_depth << "\n"
             << "written    " << opt.output << "\n";
@@ -108,7 +126,7 @@ void run_build(const BuildCommandOptions& opt) {
   progress.finish();
 
   if (!stats) stats = compute_stats(bvh, refs, options.cost);
-  print_build_summary(opt, mesh, refs, *stats, load_s, build_s, evh_report);
+  print_build_summary(opt, mesh, built, *stats, load_s, build_s, evh_report);
 }
 
 }  // namespace

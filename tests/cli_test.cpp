@@ -120,6 +120,38 @@ TEST_F(Cli, SbvhSettingsAreHonoured) {
   }
 }
 
+// What the sbvh builder did is reported: its splits are one per inner node, its references
+// within the budget and per triangle as counted; a build that splits nothing says so; other
+// builders have no such report.
+TEST_F(Cli, BuildReportsTheSpatialSplitCounts) {
+  auto build_with = [&](const std::string& options) {
+    CliRun r = run("build 'builtin?triangles=4000' " + options + " --json -o " + (dir_ / "s.bvh").string());
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return r.exit_code == 0 ? nlohmann::json::parse(r.out) : nlohmann::json::object();
+  };
+  const nlohmann::json sbvh = build_with("--builder sbvh"), none = build_with("--builder sbvh --split-alpha 1"),
+                       sweep = build_with("--builder sweep");
+  ASSERT_TRUE(sbvh.contains("spatial_split")) << sbvh.dump();
+  const nlohmann::json& s = sbvh["spatial_split"];
+  const size_t refs = sbvh["references"].get<size_t>(), triangles = sbvh["triangles"].get<size_t>();
+  EXPECT_GT(s["spatial_splits"].get<size_t>(), 0u);
+  EXPECT_GT(s["split_references"].get<size_t>(), 0u);
+  EXPECT_EQ(s["spatial_splits"].get<size_t>() + s["object_splits"].get<size_t>(),
+            sbvh["nodes"].get<size_t>() - sbvh["leaves"].get<size_t>());
+  EXPECT_LE(refs, s["budget_references"].get<size_t>());
+  EXPECT_GE(s["budget_references"].get<size_t>(), triangles + triangles / 4);  // 1.3x by default
+  EXPECT_DOUBLE_EQ(sbvh["references_per_triangle"].get<double>(), double(refs) / double(triangles));
+  ASSERT_TRUE(none.contains("spatial_split"));
+  EXPECT_EQ(none["spatial_split"]["spatial_splits"].get<size_t>(), 0u);
+  EXPECT_EQ(none["spatial_split"]["split_references"].get<size_t>(), 0u);
+  EXPECT_FALSE(sweep.contains("spatial_split"));
+  EXPECT_DOUBLE_EQ(sweep["references_per_triangle"].get<double>(), 1.0);
+  // The text names the same counts.
+  CliRun text = run("build 'builtin?triangles=4000' --builder sbvh -o " + (dir_ / "s.bvh").string());
+  EXPECT_NE(text.out.find(std::to_string(s["spatial_splits"].get<size_t>()) + " spatial and "), std::string::npos)
+      << text.out;
+}
+
 TEST_F(Cli, UnknownBuilderIsRejected) {
   CliRun r = run("build builtin --builder fastest -o " + (dir_ / "x.bvh").string());
   EXPECT_NE(r.exit_code, 0);

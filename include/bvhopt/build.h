@@ -48,6 +48,7 @@ Bvh build_bvh(const PrimitiveRefs& refs, const BuildOptions& options = {});
 struct BuiltTree {
   Bvh bvh;
   PrimitiveRefs refs;
+  std::optional<SpatialSplitStats> spatial_split;  // spatial_split's counts; empty for the others
 };
 // Any builder (all_mesh_builders()) over references to `mesh`'s triangles.
 BuiltTree build_tree(const Mesh& mesh, PrimitiveRefs refs, const BuildOptions& options = {});

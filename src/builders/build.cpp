@@ -45,10 +45,10 @@ Bvh build_bvh(const PrimitiveRefs& refs, const BuildOptions& options) {
 BuiltTree build_tree(const Mesh& mesh, PrimitiveRefs refs, const BuildOptions& options) {
   if (options.kind != BuilderKind::spatial_split) {
     Bvh bvh = build_bvh(refs, options);
-    return BuiltTree{std::move(bvh), std::move(refs)};
+    return BuiltTree{std::move(bvh), std::move(refs), std::nullopt};
   }
   SpatialSplitResult r = build_spatial_split(mesh, refs, spatial_split_config(options));
-  return BuiltTree{std::move(r.bvh), std::move(r.refs)};
+  return BuiltTree{std::move(r.bvh), std::move(r.refs), r.stats};
 }
 
 std::string_view builder_name(BuilderKind kind) {
