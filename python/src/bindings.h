@@ -13,6 +13,7 @@
 #include "bvhopt/bvh_file.h"
 #include "bvhopt/mesh.h"
 #include "bvhopt/references.h"
+#include "bvhopt/spatial_split_builder.h"
 
 namespace bvhopt::python {
 
@@ -28,6 +29,7 @@ struct Tree {
   Bvh bvh;
   PrimitiveRefs refs;
   BvhFileInfo info;
+  std::optional<SpatialSplitStats> spatial_split;  // what an sbvh build did (not kept in files)
 };
 
 // Limits oneTBB to `threads` for the scope (none: all cores); throws Error for threads < 1.

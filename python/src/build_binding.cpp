@@ -63,6 +63,7 @@ Tree build(const Scene& scene, const std::string& builder, uint32_t leaf_size, d
         scene.mesh, subdivide ? subdivide_edge_volume(scene.mesh, *subdivide).refs : make_references(scene.mesh), options);
     tree.bvh = std::move(built.bvh);
     tree.refs = std::move(built.refs);
+    tree.spatial_split = built.spatial_split;
     // Over subdivided references a leaf keeps one reference per triangle (as the command
     // line; the sbvh builder's leaves already do).
     if (subdivide && options.kind != BuilderKind::spatial_split) dedup_leaf_references(tree.bvh, tree.refs);
@@ -75,7 +76,7 @@ Tree load(const py::object& path) {
   const std::string file = path_text(path);
   py::gil_scoped_release unlocked;
   BvhFile f = read_bvh_file(file);
-  return Tree{std::move(f.bvh), std::move(f.refs), std::move(f.info)};
+  return Tree{std::move(f.bvh), std::move(f.refs), std::move(f.info), std::nullopt};
 }
 
 }  // namespace

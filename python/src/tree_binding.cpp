@@ -117,6 +117,21 @@ void register_tree(py::module_& m) {
                              "SAH cost, normalized by the root's area (each triangle once per leaf)")
       .def_property_readonly("ocost", [](const Tree& t) { return optimal_collapse_cost(t.bvh, t.refs, t.info.cost); },
                              "SAH cost after the best collapse of subtrees into leaves")
+      .def_property_readonly(
+          "spatial_split",
+          [](const Tree& t) -> py::object {
+            if (!t.spatial_split) return py::none();
+            const SpatialSplitStats& s = *t.spatial_split;
+            py::dict d;
+            d["budget_references"] = s.budget;
+            d["spatial_splits"] = s.spatial_splits;
+            d["object_splits"] = s.object_splits;
+            d["split_references"] = s.split_references;
+            d["unsplit_references"] = s.unsplit_references;
+            return d;
+          },
+          "What the sbvh build did (as `bvhopt build --json`'s spatial_split): the reference budget, spatial "
+          "and object splits, references cut and sent whole; None for other builders and loaded files")
       .def_property_readonly("method", [](const Tree& t) { return t.info.method; })
       .def_property_readonly("scene_name", [](const Tree& t) { return t.info.scene_name; })
       .def_property_readonly("scene_triangles", [](const Tree& t) { return t.info.scene_triangles; })

@@ -47,6 +47,8 @@ def test_build_cost_equals_the_command_line(cli, tmp_path, scene, builder):
     assert bvh.cost == ref["cost"]
     assert bvh.ocost == ref["ocost"]
     assert bvh.stats()["nodes"] == ref["nodes"]
+    assert bvh.spatial_split == ref.get("spatial_split")  # None but for sbvh
+    assert (bvh.spatial_split is not None) == (builder == "sbvh")
     bvh.save(tmp_path / "b.bvh")
     np.testing.assert_array_equal(bvhopt.load(tmp_path / "a.bvh").nodes, bvhopt.load(tmp_path / "b.bvh").nodes)
 
@@ -58,6 +60,7 @@ def test_sbvh_settings_equal_the_command_line(cli, tmp_path, scene, option, valu
     ref = run_cli(cli, "build", SCENE, "--builder", "sbvh", flag, str(value), "-o", str(tmp_path / "a.bvh"))
     bvh = bvhopt.build(scene, builder="sbvh", **{option: value})
     assert bvh.cost == ref["cost"] and bvh.stats()["nodes"] == ref["nodes"]
+    assert bvh.spatial_split == ref["spatial_split"]
     # Each setting changes the tree, so a binding that dropped it would fail above or here.
     assert bvh.cost != bvhopt.build(scene, builder="sbvh").cost
 
