@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cctype>
 #include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -88,6 +89,7 @@ struct BakeStart {
   OptimizeReport report;
   uint64_t leaves = 0;
   uint64_t references = 0;  // made by the builder (before the collapse keeps one per triangle in a leaf)
+  std::optional<SpatialSplitStats> spatial_split;  // the sbvh builder's counts
   std::string insertion_form;  // the form the optimizer took (hybrid resolves by the tree's size)
   bool insertion_parallel_start = false;  // the regional form's parallel first stage ran
   Bvh bvh;
@@ -197,6 +199,7 @@ BakeStart bake_start(const BakeOptions& opt, const Mesh& mesh, SceneBuilderOptio
     s.bvh = std::move(built.bvh);
     s.refs = std::move(built.refs);
     s.references = s.refs.size();
+    s.spatial_split = built.spatial_split;
     s.build_seconds = build_clock.seconds();
     s.cost_built = sah_cost(s.bvh, s.refs, cost);
   }
@@ -314,8 +317,9 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
                       {"insertion_parallel_start", s.insertion_parallel_start},
                       {"optimize_profile", stages_json(s.report)},
                       {"leaves", s.leaves}});
+    if (s.spatial_split) starts.back()["spatial_split"] = spatial_split_json(*s.spatial_split);
   }
-  print_json({{"scene", opt.scene.spec},
+  nlohmann::json out = {{"scene", opt.scene.spec},
               {"triangles", r.triangles},
               {"quality", opt.quality},
               {"builder", r.builder},
@@ -340,7 +344,9 @@ void print_bake_json(const BakeOptions& opt, const BakeResult& r) {
               {"max_leaf_size", opt.max_leaf_size},
               {"starts", starts},
               {"peak_rss_bytes", r.peak_rss},
-              {"output", opt.output}});
+              {"output", opt.output}};
+  if (best.spatial_split) out["spatial_split"] = spatial_split_json(*best.spatial_split);
+  print_json(out);
 }
 
 void print_bake_summary(const BakeOptions& opt, const BakeResult& r) {
@@ -352,7 +358,11 @@ void print_bake_summary(const BakeOptions& opt, const BakeResult& r) {
     if (r.starts.size() > 1)
       std::cout << "start " << k + 1 << "    " << start_text(s.spec)
                 << (k == r.kept ? " (kept: lowest cost)" : "") << "\n";
-    std::cout << "build      " << r.builder << " (" << s.references << " references), cost "
+    std::string made = std::to_string(s.references) + " references";
+    if (s.spatial_split)
+      made += ", " + std::to_string(s.spatial_split->spatial_splits) + " spatial splits, " +
+              std::to_string(s.spatial_split->split_references) + " references cut";
+    std::cout << "build      " << r.builder << " (" << made << "), cost "
               << format_double(s.cost_built, 4) << ", " << format_double(s.build_seconds, 2) << " s\n"
               << "optimize   insertion, cost " << format_double(s.cost_optimized, 4) << ", "
               << format_double(s.optimize_seconds, 2) << " s, " << s.report.passes << " passes ("

@@ -53,12 +53,7 @@ void print_build_summary(const BuildCommandOptions& opt, const Mesh& mesh, const
                           {"leaves", st.leaves},
                           {"max_depth", st.max_depth},
                           {"output", opt.output}};
-    if (const auto& s = built.spatial_split)
-      out["spatial_split"] = {{"budget_references", s->budget},
-                              {"spatial_splits", s->spatial_splits},
-                              {"object_splits", s->object_splits},
-                              {"split_references", s->split_references},
-                              {"unsplit_references", s->unsplit_references}};
+    if (built.spatial_split) out["spatial_split"] = spatial_split_json(*built.spatial_split);
     print_json(out);
     return;
   }

@@ -159,6 +159,14 @@ void ProgressLine::finish() {
 
 void print_json(const nlohmann::json& j) { std::cout << j.dump(2) << "\n"; }
 
+nlohmann::json spatial_split_json(const SpatialSplitStats& s) {
+  return {{"budget_references", s.budget},
+          {"spatial_splits", s.spatial_splits},
+          {"object_splits", s.object_splits},
+          {"split_references", s.split_references},
+          {"unsplit_references", s.unsplit_references}};
+}
+
 std::string format_double(double v, int precision) {
   if (std::isnan(v)) return "nan";
   if (std::isinf(v)) return v > 0 ? "inf" : "-inf";

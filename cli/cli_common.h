@@ -112,6 +112,8 @@ bool stderr_is_terminal();
 
 // Prints JSON to stdout (pretty, with a trailing newline).
 void print_json(const nlohmann::json& j);
+// An sbvh build's counts, as build and bake report them under "spatial_split".
+nlohmann::json spatial_split_json(const SpatialSplitStats& s);
 
 // Fixed-width table printing for human output.
 std::string format_double(double v, int precision);

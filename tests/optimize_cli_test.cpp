@@ -184,6 +184,14 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
   EXPECT_EQ(j["starts"][0]["spatial_max"], 0);
   EXPECT_EQ(j["starts"][1]["spatial_max"], 0);
   EXPECT_EQ(j["starts"][2]["spatial_max"], 256);
+  // Each start's build reports its splits (as build --json), its references within the budget.
+  for (const nlohmann::json& s : j["starts"]) {
+    ASSERT_TRUE(s.contains("spatial_split")) << s.dump();
+    EXPECT_LE(s["references"].get<size_t>(), s["spatial_split"]["budget_references"].get<size_t>());
+    EXPECT_GE(s["spatial_split"]["budget_references"].get<double>(), 1.25 * j["triangles"].get<double>());
+    EXPECT_GT(s["spatial_split"]["object_splits"].get<size_t>(), 0u);
+    EXPECT_GT(s["spatial_split"]["spatial_splits"].get<size_t>(), 0u);
+  }
   const double c1 = j["starts"][0]["cost"].get<double>(), c8 = j["starts"][1]["cost"].get<double>(),
                c256 = j["starts"][2]["cost"].get<double>();
   EXPECT_NE(c256, c8) << "the limited start builds another tree";
@@ -191,6 +199,12 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
   EXPECT_EQ(j["cost"].get<double>(), cheapest);
   EXPECT_EQ(j["start_leaf_size"], cheapest == c1 ? 1 : 8);
   EXPECT_EQ(j["start_spatial_max"], cheapest == c256 && cheapest < c8 && cheapest < c1 ? 256 : 0);
+  // The top level's counts are the kept start's.
+  for (const nlohmann::json& s : j["starts"]) {
+    if (s["cost"].get<double>() == cheapest) {
+      EXPECT_EQ(j["spatial_split"], s["spatial_split"]);
+    }
+  }
   EXPECT_LT(j["starts"][0]["cost"].get<double>(), j["starts"][0]["cost_optimized"].get<double>());  // collapsing one-triangle leaves gains
   for (const auto& s : j["starts"]) EXPECT_EQ(s["stop_reason"], "converged");
   BvhFile file = read_bvh_file(a);
@@ -267,6 +281,9 @@ TEST_F(OptimizeCli, BakeBuildsOptimizesAndCollapses) {
             0)
       << err;
   EXPECT_EQ(nlohmann::json::parse(out)["starts"].size(), 2u);
+  // Nor does it report spatial splits.
+  EXPECT_FALSE(nlohmann::json::parse(out).contains("spatial_split"));
+  EXPECT_FALSE(nlohmann::json::parse(out)["starts"][1].contains("spatial_split"));
 
   // What bake writes traces in every layout: its collapse stops at the 64 triangles a wide
   // leaf holds, even where one leaf would cost less (here c_T so high that the whole scene
