@@ -111,12 +111,12 @@ struct BakeResult {
 // on the build's leaves: from leaves of one it reaches the lowest final cost on the scanned
 // and character meshes, from the SBVH's own SAH leaves (up to 8) on the architectural
 // scenes and the CAD engine, where the collapse after a one-per-leaf optimization undoes
-// part of its gain (Sponza 143.08 from leaves of one, 142.10 from leaves of up to 8; with
+// part of its gain (Sponza 142.77 from leaves of one, 141.76 from leaves of up to 8; with
 // an earlier builder 142.86 at 4, 142.45 at 8, 142.69 at 16). Insertion also never merges
 // a triangle's pieces again, so the spatial splits the greedy build makes near the root
-// stay: with them only in nodes of at most 256 references, Conference reaches 75.12
-// instead of 76.63 and staircase 35.26 instead of 36.56, and their rays visit fewer nodes;
-// Sponza and the CAD engine lose (143.81 against 142.10, 226.21 against 214.57). The tables are in
+// stay: with them only in nodes of at most 256 references, Conference reaches 75.11
+// instead of 76.55 and staircase 35.25 instead of 36.55, and their rays visit fewer nodes;
+// Sponza and the CAD engine lose (143.58 against 141.76, 225.86 against 213.98). The tables are in
 // docs/spatial-splits.md. No start wins everywhere, and all converge in seconds on the
 // shared scenes, so best runs them all and keeps the cheapest.
 // The first two take --spatial-max (0 unless given).
