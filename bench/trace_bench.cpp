@@ -29,6 +29,11 @@
 // tree's geometric mean ratio to Embree MEDIUM over every scene and ray set, per ray set
 // too, and the number of pairs where it is at least 1.
 //
+// --batch-sizes N,... adds the first bvh8 row (best-bvh8) traced on 1 thread in calls of N rays
+// each, one call after the other on the calling thread: what a renderer that traces a tile
+// or a packet at a time gets (the other rows trace each oneTBB chunk, thousands of rays, in
+// one call); 1 is one call per ray.
+//
 // Every figure is the median of R timed passes; the candidates are timed round-robin within
 // each repeat so machine load drifts alike over all of them. Ratios are ours / Embree's.
 // 1-thread figures use the calling thread's CPU time (all the work runs there when oneTBB
@@ -102,6 +107,7 @@ struct Options {
   std::vector<double> block_costs;
   bool fit_costs = false;
   std::string baked_dir;  // empty: no "baked" row
+  std::vector<uint32_t> batch_sizes;  // --batch-sizes: best-bvh8 traced in calls of these many rays
 };
 
 Options parse(int argc, char** argv) {
@@ -124,6 +130,12 @@ Options parse(int argc, char** argv) {
     else if (a == "--best-seconds") o.best_seconds = args.double_value();
     else if (a == "--best-leaf") o.best_leaf = args.u32_value();
     else if (a == "--baked") o.baked_dir = args.value();
+    else if (a == "--batch-sizes") {
+      for (double v : parse_positive_list(args.value(), a)) {
+        if (v != std::floor(v) || v > 1e9) throw Error("--batch-sizes: " + std::to_string(v) + " is not a whole number of rays");
+        o.batch_sizes.push_back(uint32_t(v));
+      }
+    }
     else if (a == "--kinds") {
       o.kinds.clear();
       for (const std::string& k : split_list(args.value())) {
@@ -137,7 +149,8 @@ Options parse(int argc, char** argv) {
                    "            [--quick] [--wall]   (only the leaf-1 sweep tree and best)\n"
                    "            [--best-seconds S] [--best-leaf N]   (the 'best' row; S = 0 drops it)\n"
                    "            [--json FILE] [--no-wide] [--wide-variants] [--block-costs 0.25,0.35] [--fit-costs]\n"
-                   "            [--baked DIR]   (the 'baked' row: DIR/<scene>.bvh from bvhopt bake --quality best)\n";
+                   "            [--baked DIR]   (the 'baked' row: DIR/<scene>.bvh from bvhopt bake --quality best)\n"
+                   "            [--batch-sizes 1,16,256]   (best-bvh8 on 1 thread in calls of that many rays)\n";
       std::exit(0);
     } else {
       throw Error("unknown option '" + a + "'");
@@ -317,6 +330,23 @@ void trace_wide(const WideTracer& w, const std::vector<Ray>& rays, RayQuery quer
       for (size_t i = 0; i < n; ++i) hits[b + i] = any[i] ? Hit{0.0f, 0.0f, 0.0f, 0} : Hit{};
     }
   });
+}
+
+// The rays traced in calls of `batch` rays each, one after the other on the calling thread.
+void trace_wide_calls(const WideTracer& w, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits,
+                      size_t batch) {
+  hits.resize(rays.size());
+  TraceCounters c;
+  std::vector<uint8_t> any(query == RayQuery::closest ? 0 : batch);
+  for (size_t b = 0; b < rays.size(); b += batch) {
+    const size_t n = std::min(batch, rays.size() - b);
+    if (query == RayQuery::closest) {
+      w.closest(rays.data() + b, n, hits.data() + b, c);
+    } else {
+      w.any(rays.data() + b, n, any.data(), c);
+      for (size_t i = 0; i < n; ++i) hits[b + i] = any[i] ? Hit{0.0f, 0.0f, 0.0f, 0} : Hit{};
+    }
+  }
 }
 
 // Bytes per triangle of the binary trace layout (a 64-byte TraceNode per inner node, 36 bytes of
@@ -616,9 +646,14 @@ int run(const Options& opt) {
       for (const WideTree& w : wide) {
         const WideTracer* wt = w.tracer.get();
         cands.push_back({w.name, 1, [=, &rays, &set](std::vector<Hit>& h) { trace_wide(*wt, rays, set.query, h); }, {}});
-        if (w.name == "best-bvh8")
+        if (w.name == "best-bvh8") {
           cands.push_back({"best-bvh8-2t", 2,
                            [=, &rays, &set](std::vector<Hit>& h) { trace_wide(*wt, rays, set.query, h); }, {}});
+          for (uint32_t n : opt.batch_sizes)
+            cands.push_back({"best-bvh8-calls-" + std::to_string(n), 1, [=, &rays, &set](std::vector<Hit>& h) {
+                               trace_wide_calls(*wt, rays, set.query, h, n);
+                             }, {}});
+        }
       }
       std::vector<Hit> hits;
       for (int r = 0; r < opt.repeats; ++r)
@@ -692,9 +727,18 @@ int run(const Options& opt) {
       std::printf("%-8s %8s %6s | %-16s %7.2f %7s %7s | %7.2f   (Embree HIGH)\n", "", "", "", "embree-high",
                   mrays("embreeH1"), "", "", e1 > 0 ? mrays("embreeH1") / e1 : 0.0);
 #endif
-      if (!wide.empty() && wide[0].name == "best-bvh8")
+      if (!wide.empty() && wide[0].name == "best-bvh8") {
         std::printf("%-8s best-bvh8 on 2 threads: %.2f Mrays/s, %.2fx its 1 thread\n", "", mrays("best-bvh8-2t"),
                     mrays("best-bvh8-2t") / mrays("best-bvh8"));
+        json calls = json::array();
+        for (uint32_t n : opt.batch_sizes) {
+          const double m = mrays("best-bvh8-calls-" + std::to_string(n));
+          std::printf("%-8s best-bvh8 in calls of %u rays: %.2f Mrays/s, %.2fx its one call a chunk, %.2fx Embree MEDIUM\n",
+                      "", n, m, m / mrays("best-bvh8"), e1 > 0 ? m / e1 : 0.0);
+          calls.push_back({{"rays_per_call", n}, {"mrays_1t", m}, {"ratio_1t", e1 > 0 ? m / e1 : 0.0}});
+        }
+        if (!opt.batch_sizes.empty()) row["wide_calls"] = calls;
+      }
       row["sah_vs_time_correlation"] = pearson(costs, ns_per_ray);
       std::printf("%-8s correlation(SAH cost, ns/ray) over %zu trees: %.3f   (sweep-l1 SAH %.2f)\n", "",
                   trees.size(), pearson(costs, ns_per_ray), trees[0].sah);

@@ -415,6 +415,122 @@ TEST(WideTrace, RaysTracedSideBySideGiveTheSameHitsAndWork) {
   EXPECT_THROW(WideTracer(flat, mesh, too_many), Error);
 }
 
+// Each ray through the per-ray entry points (closest(const Ray&), any(const Ray&): a kernel
+// of its own, without a batch's set-up) against the same rays in batches: the same hits, the
+// same answers to any-hit, the same counted work, for every width, triangle test, child order
+// and ISA, on every ray set.
+void expect_per_ray_calls_match_batches(const FlatBvh& flat, const Mesh& mesh, const std::vector<RaySet>& sets,
+                                        const std::string& what) {
+  for (const Variant& v : all_variants()) {
+    const WideTracer tracer = make_tracer(flat, mesh, v);
+    for (const RaySet& set : sets) {
+      const std::vector<Ray>& rays = set.rays;
+      std::vector<Hit> batch_hits(rays.size());
+      std::vector<uint8_t> batch_any(rays.size());
+      TraceCounters batch_closest, batch_anyc;
+      tracer.closest(rays.data(), rays.size(), batch_hits.data(), batch_closest);
+      tracer.any(rays.data(), rays.size(), batch_any.data(), batch_anyc);
+      TraceCounters one_closest, one_any;
+      size_t hits = 0;
+      for (size_t i = 0; i < rays.size(); ++i) {
+        const Hit h = tracer.closest(rays[i], one_closest);
+        const bool a = tracer.any(rays[i], one_any);
+        hits += h.hit();
+        ASSERT_EQ(h.triangle_id, batch_hits[i].triangle_id) << what << " " << v.name() << " ray " << i;
+        ASSERT_EQ(h.t, batch_hits[i].t) << what << " " << v.name() << " ray " << i;
+        ASSERT_EQ(h.u, batch_hits[i].u);
+        ASSERT_EQ(h.v, batch_hits[i].v);
+        ASSERT_EQ(a, batch_any[i] != 0) << what << " " << v.name() << " ray " << i;
+      }
+      ASSERT_GT(hits, 0u) << what << ": the rays must hit something for this test to mean anything";
+      // A batch of many rays may order children another way (compaction on incoherent
+      // batches, see CoherentAndIncoherentBatches...), which visits the same nodes in the same
+      // order: the counted work is the same either way.
+      EXPECT_EQ(one_closest.steps, batch_closest.steps) << what << " " << v.name() << " " << ray_kind_name(set.kind);
+      EXPECT_EQ(one_closest.triangle_tests, batch_closest.triangle_tests) << what << " " << v.name();
+      EXPECT_EQ(one_any.steps, batch_anyc.steps) << what << " " << v.name() << " " << ray_kind_name(set.kind);
+      EXPECT_EQ(one_any.triangle_tests, batch_anyc.triangle_tests) << what << " " << v.name();
+    }
+  }
+}
+
+TEST(WideTrace, PerRayCallsGiveTheSameHitsAndWorkAsBatches) {
+  const Mesh mesh = testing::random_mesh(2000, 47, true);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 4);
+  expect_per_ray_calls_match_batches(flat, mesh, ray_sets_for(mesh, flat, 1500), "sweep tree");
+}
+
+// A tree whose traversal may need more stack than the per-ray kernel's own (a caterpillar:
+// each inner node a one-triangle leaf and the rest of the row) takes the batch path for
+// single rays too, with the same results.
+TEST(WideTrace, PerRayCallsOnATreeDeeperThanTheirStack) {
+  const uint32_t n = 3000;
+  Mesh mesh;
+  for (uint32_t i = 0; i < n; ++i) {
+    const float x = float(i);
+    for (float v : {x, 0.0f, 0.0f, x + 0.5f, 0.0f, 0.0f, x, 1.0f, 0.5f}) mesh.positions.push_back(v);
+    for (uint32_t k = 0; k < 3; ++k) mesh.indices.push_back(3 * i + k);
+  }
+  auto triangle_box = [&](uint32_t i) { return Box(Vec3(float(i), 0.0f, 0.0f), Vec3(float(i) + 0.5f, 1.0f, 0.5f)); };
+  FlatBvh flat;
+  // Depth-first: inner node k (triangles k..n-1) at 2k, its leaf (triangle k) at 2k + 1, the
+  // inner node k + 1 at 2k + 2; the last inner node's right child is the last triangle's leaf.
+  for (uint32_t k = 0; k + 1 < n; ++k) {
+    FlatNode inner{};
+    inner.box = Box(Vec3(float(k), 0.0f, 0.0f), Vec3(float(n - 1) + 0.5f, 1.0f, 0.5f));
+    inner.index = 2 * k + 2;
+    inner.axis = 0;
+    flat.nodes.push_back(inner);
+    FlatNode leaf{};
+    leaf.box = triangle_box(k);
+    leaf.index = k;
+    leaf.count = 1;
+    flat.nodes.push_back(leaf);
+    flat.triangle_ids.push_back(k);
+  }
+  FlatNode last{};
+  last.box = triangle_box(n - 1);
+  last.index = n - 1;
+  last.count = 1;
+  flat.nodes.push_back(last);
+  flat.triangle_ids.push_back(n - 1);
+  for (uint32_t w : {4u, 8u}) {
+    const WideTracer tracer = make_tracer(flat, mesh, {w, TriangleTest::moller_trumbore, NearFirst::octant_order,
+                                                       machine_isas().back()});
+    ASSERT_GT(tracer.layout().stack_entries(), wide_kernels::kOneRayStackEntries)
+        << "bvh" << w << ": the tree must need more stack than the per-ray kernel has for this test to mean anything";
+  }
+  // Rays along the row, from both ends and through the middle, and across it.
+  std::vector<Ray> rays;
+  std::mt19937 rng(48);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (int i = 0; i < 400; ++i) {
+    Ray r;
+    r.org = Vec3(i % 2 ? -10.0f : float(n) + 10.0f, u(rng) * 0.6f, 0.2f + 0.1f * u(rng));
+    r.dir = Vec3(i % 2 ? 1.0f : -1.0f, 0.02f * (u(rng) - 0.5f), 0.01f * (u(rng) - 0.5f));
+    rays.push_back(r);
+    Ray across;
+    across.org = Vec3(u(rng) * float(n), 0.3f * u(rng), -5.0f);
+    across.dir = Vec3(0.0f, 0.0f, 1.0f);
+    rays.push_back(across);
+  }
+  RaySet set;
+  set.kind = RayKind::random;
+  set.rays = rays;
+  expect_per_ray_calls_match_batches(flat, mesh, {set}, "caterpillar");
+  // And against brute force.
+  for (const Variant& v : all_variants()) {
+    const WideTracer tracer = make_tracer(flat, mesh, v);
+    TraceCounters c;
+    for (size_t i = 0; i < rays.size(); ++i) {
+      const Hit want = oracle(mesh, rays[i], v.test), got = tracer.closest(rays[i], c);
+      ASSERT_EQ(got.triangle_id, want.triangle_id) << v.name() << " ray " << i;
+      ASSERT_EQ(got.t, want.t) << v.name() << " ray " << i;
+    }
+  }
+}
+
 TEST(WideTrace, HitsSomethingAndMissesSomething) {
   // Guards the comparisons above against a vacuous pass.
   const Mesh mesh = testing::random_mesh(1200, 21, true);

@@ -55,14 +55,21 @@ class WideTracer {
  public:
   WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOptions& options = {});
 
+  // One ray per call, as a renderer's ray at a time: a kernel of its own, picked when the
+  // tracer is made, with no batch to set up (docs/wide-bvh.md, "One ray a call").
   Hit closest(const Ray& ray, TraceCounters& counters) const;
   bool any(const Ray& ray, TraceCounters& counters) const;
-  // Many rays in one call (no per-ray dispatch); counters accumulate.
+  // Many rays in one call; counters accumulate. Batches of more than 16 rays are looked at
+  // first (coherent camera rays, scattered random rays) to pick how they are traced; smaller
+  // ones go ray by ray as above. The hits and the counted work are the same either way.
   void closest(const Ray* rays, size_t count, Hit* hits, TraceCounters& counters) const;
   void any(const Ray* rays, size_t count, uint8_t* hit, TraceCounters& counters) const;
 
   Isa isa() const { return isa_; }
   const WideBvh& layout() const { return bvh_; }
+
+  // The per-ray kernels' type (internal: src/trace/wide_kernels.h).
+  using OneRayFn = bool (*)(const std::byte* arena, uint32_t root, const Ray& ray, Hit& hit, TraceCounters& counters);
 
  private:
   WideBvh bvh_;
@@ -70,6 +77,10 @@ class WideTracer {
   NearFirst near_first_;
   uint32_t lanes_;
   float scatter_distance_;  // wide_kernels::scatter_distance of the scene, computed once
+  // The kernels of the per-ray entry points, picked once; null where the tree needs a deeper
+  // stack than theirs (those calls take the batch path).
+  OneRayFn one_closest_ = nullptr;
+  OneRayFn one_any_ = nullptr;
 };
 
 }  // namespace bvhopt

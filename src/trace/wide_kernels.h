@@ -60,4 +60,14 @@ void trace_sse42(const Batch& batch);
 void trace_avx2(const Batch& batch);
 void trace_avx512(const Batch& batch);
 
+// One ray without a batch (WideTracer::closest(const Ray&) and any(const Ray&)): the kernel
+// for a layout's width and triangle test, a child order and query, picked once per tracer.
+// It returns whether anything was hit; `hit` gets the closest hit (closest-hit kernels only).
+// Its stack holds kOneRayStackEntries entries: trees that need more take the batch path.
+using OneRayFn = WideTracer::OneRayFn;
+inline constexpr uint32_t kOneRayStackEntries = 256;
+OneRayFn one_ray_sse42(uint32_t width, TriangleTest test, NearFirst order, bool any);
+OneRayFn one_ray_avx2(uint32_t width, TriangleTest test, NearFirst order, bool any);
+OneRayFn one_ray_avx512(uint32_t width, TriangleTest test, NearFirst order, bool any);
+
 }  // namespace bvhopt::wide_kernels

@@ -2,6 +2,7 @@
 #include "bvhopt/wide_tracer.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -23,6 +24,16 @@ KernelFn kernel_for(Isa isa) {
   return wide_kernels::trace_sse42;
 }
 
+WideTracer::OneRayFn one_ray_kernel_for(Isa isa, const WideBvh& bvh, NearFirst order, bool any) {
+  if (bvh.stack_entries() > wide_kernels::kOneRayStackEntries) return nullptr;
+  switch (isa) {
+    case Isa::sse42: return wide_kernels::one_ray_sse42(bvh.width(), bvh.triangle_test(), order, any);
+    case Isa::avx2: return wide_kernels::one_ray_avx2(bvh.width(), bvh.triangle_test(), order, any);
+    case Isa::avx512: return wide_kernels::one_ray_avx512(bvh.width(), bvh.triangle_test(), order, any);
+  }
+  return nullptr;
+}
+
 // The lanes' stacks fit on the C stack for most trees (each lane's the tree's stack need,
 // rounded up to whole cache lines); deeper trees or more lanes get them on the heap. (Sized
 // for every lane at 512 entries, the frame was 64 KiB with 16 lanes.)
@@ -39,16 +50,34 @@ WideTracer::WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOpt
   if (options.lanes > kMaxTraceLanes)
     throw Error("wide tracer: " + std::to_string(options.lanes) + " lanes asked for, at most " +
                 std::to_string(kMaxTraceLanes));
+  one_closest_ = one_ray_kernel_for(isa_, bvh_, near_first_, false);
+  one_any_ = one_ray_kernel_for(isa_, bvh_, near_first_, true);
 }
 
 namespace wide_kernels {
 namespace {
+// Where the k-th of the 32 pairs lies in a batch, as a fraction of it: the fractional part of
+// 0.5 + k / phi. Spread by the golden ratio, not evenly: an even stride can fall in step with
+// an image's rows and land every pair on a row's end or its middle, where neighbours differ.
+// A table made at compile time: computed per call with std::fmod (a library call of about a
+// hundred cycles), the 64 of a batch's two samplings cost some 2 us a call, which calls of 256
+// ambient occlusion rays on staircase paid as 30 % of their time.
+constexpr std::array<double, 32> kPairSpread = [] {
+  std::array<double, 32> spread{};
+  for (size_t k = 0; k < spread.size(); ++k) {
+    const double x = 0.5 + 0.6180339887498949 * double(k);
+    spread[k] = x - double(uint64_t(x));  // x - floor(x), exact, as fmod(x, 1.0) is
+  }
+  // In increasing order, so that the samples read a batch front to back (order-free result).
+  for (size_t i = 1; i < spread.size(); ++i)
+    for (size_t j = i; j > 0 && spread[j - 1] > spread[j]; --j) std::swap(spread[j - 1], spread[j]);
+  return spread;
+}();
+
 // The first of the k-th pair of neighbours the batch tests are judged by (0 <= k < 32, count
-// >= 2). Spread by the golden ratio, not evenly: an even stride can fall in step with an
-// image's rows and land every pair on a row's end or its middle, where neighbours differ.
+// >= 2).
 size_t sample_pair(size_t k, size_t count) {
-  const double spread = std::fmod(0.5 + 0.6180339887498949 * double(k), 1.0);
-  return std::min(count - 2, size_t(spread * double(count - 1)));
+  return std::min(count - 2, size_t(kPairSpread[k] * double(count - 1)));
 }
 }  // namespace
 
@@ -126,7 +155,16 @@ void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, uint32_t lanes, fl
 }
 }  // namespace
 
+// Batches this small go ray by ray through the per-ray kernel: a batch's set-up (judging
+// its rays coherent or scattered from up to 32 pairs of them) costs more than it can gain
+// there, and side by side tracing starts only after the first 16 rays anyway.
+constexpr size_t kMaxRaysOneByOne = 16;
+
 void WideTracer::closest(const Ray* rays, size_t count, Hit* hits, TraceCounters& counters) const {
+  if (count <= kMaxRaysOneByOne && one_closest_) {
+    for (size_t i = 0; i < count; ++i) one_closest_(bvh_.data(), bvh_.root(), rays[i], hits[i], counters);
+    return;
+  }
   run_kernel(bvh_, isa_, near_first_, lanes_, scatter_distance_, counters, [&](wide_kernels::Batch& b) {
     b.rays = rays;
     b.count = count;
@@ -135,6 +173,11 @@ void WideTracer::closest(const Ray* rays, size_t count, Hit* hits, TraceCounters
 }
 
 void WideTracer::any(const Ray* rays, size_t count, uint8_t* hit, TraceCounters& counters) const {
+  if (count <= kMaxRaysOneByOne && one_any_) {
+    Hit unused;
+    for (size_t i = 0; i < count; ++i) hit[i] = one_any_(bvh_.data(), bvh_.root(), rays[i], unused, counters) ? 1 : 0;
+    return;
+  }
   run_kernel(bvh_, isa_, near_first_, lanes_, scatter_distance_, counters, [&](wide_kernels::Batch& b) {
     b.rays = rays;
     b.count = count;

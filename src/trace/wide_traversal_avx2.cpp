@@ -4,5 +4,8 @@
 namespace bvhopt::wide_kernels {
 
 void trace_avx2(const Batch& batch) { trace_batch(batch); }
+OneRayFn one_ray_avx2(uint32_t width, TriangleTest test, NearFirst order, bool any) {
+  return one_ray_kernel(width, test, order, any);
+}
 
 }  // namespace bvhopt::wide_kernels
