@@ -48,6 +48,7 @@ struct TraceOptions {
   std::string order = "axis";
   uint64_t check = 1000;
   int repeats = 3;
+  uint32_t rays_per_call = 0;  // 0: a block of 256 rays a call
   uint32_t width = 1024, height = 768;
   CameraOptions camera;
   LayoutOption layout;
@@ -99,6 +100,7 @@ void print_trace_json(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
                       {"layout_seconds", tree.layout_seconds},
                       {"wide_block_cost", opt.wide_cost.block},
                       {"hit_rate", m1.hit_rate},
+                      {"rays_per_call", opt.rays_per_call},
                       {"threads_1", {{"seconds", m1.seconds}, {"rays_per_second", m1.rays_per_second}}},
                       {"threads_n", {{"threads", mn.threads}, {"seconds", mn.seconds},
                                      {"rays_per_second", mn.rays_per_second}}},
@@ -124,7 +126,11 @@ void print_trace_text(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
             << "hit rate   " << format_double(100.0 * m1.hit_rate, 2) << " %\n"
             << "speed      " << format_double(m1.rays_per_second / 1e6, 3) << " Mrays/s on 1 thread, "
             << format_double(mn.rays_per_second / 1e6, 3) << " on " << mn.threads << " (x"
-            << format_double(mn.rays_per_second / m1.rays_per_second, 2) << "), order " << opt.order << "\n"
+            << format_double(mn.rays_per_second / m1.rays_per_second, 2) << "), order " << opt.order
+            << (opt.rays_per_call ? ", calls of " + std::to_string(opt.rays_per_call) + " ray" +
+                                        (opt.rays_per_call == 1 ? "" : "s")
+                                  : std::string())
+            << "\n"
             << "steps/ray  mean " << format_double(m1.steps.mean, 2) << ", p50 " << m1.steps.p50 << ", p90 "
             << m1.steps.p90 << ", p99 " << m1.steps.p99 << ", max " << m1.steps.max << "\n"
             << "           " << histogram_line(m1.steps) << "\n"
@@ -192,6 +198,7 @@ void run_trace(const TraceOptions& opt) {
   one.order = order;
   one.threads = 1;
   one.repeats = opt.repeats;
+  one.rays_per_call = opt.rays_per_call;
   r.one_thread = measure_rays(traced, set.rays, set.query, one);
   MeasureOptions all = one;
   all.threads = opt.threads.effective();
@@ -238,6 +245,12 @@ void register_trace_command(CLI::App& app) {
       ->check(whole_number(0, kMaxRayCount))
       ->capture_default_str();
   cmd->add_option("--repeats", opt->repeats, "Timed passes (median reported)")->check(CLI::Range(1, 100))->capture_default_str();
+  cmd->add_option("--rays-per-call", opt->rays_per_call,
+                  "Time the rays traced in calls of this many (1: one ray a call, as a renderer tracing a ray at a "
+                  "time; 0: blocks of 256 rays)")
+      ->check(CLI::Range(0u, 1000000u))
+      ->type_name("N")
+      ->capture_default_str();
   cmd->add_option("--save-rays", opt->save_rays, "Write the ray set to this ray file")->type_name("FILE");
   cmd->add_option("--save-hits", opt->save_hits,
                   "Write each ray's hit (triangle id and t, u, v as hex floats, or miss) to this text file")

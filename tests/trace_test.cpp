@@ -6,9 +6,11 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <memory>
 #include <random>
 #include <utility>
 
+#include "bvhopt/any_tracer.h"
 #include "bvhopt/build.h"
 #include "bvhopt/error.h"
 #include "bvhopt/finalize.h"
@@ -231,6 +233,43 @@ TEST(Trace, RandomRaysHitSomethingAndMissSomething) {
   EXPECT_LT(m.hit_rate, 0.999);
   EXPECT_GT(m.steps.mean, 1.0);
   EXPECT_GT(m.triangle_tests.mean, 0.5);
+}
+
+// trace_rays' calls of N rays (what `bvhopt trace --rays-per-call N` times) give the hits of
+// one ray a call: every ray traced once, none twice, in every layout, closest and any hit,
+// for call sizes that do and do not divide the blocks.
+TEST(Trace, RaysPerCallGiveTheHitsOfOneRayACall) {
+  const Mesh mesh = testing::random_mesh(1500, 11, true);
+  const FlatBvh flat = flat_tree(mesh, BuilderKind::sweep_sah, 4);
+  const Tracer binary(flat, mesh);
+  for (TraceLayout layout : {TraceLayout::bvh2, TraceLayout::bvh4, TraceLayout::bvh8}) {
+    const std::unique_ptr<WideTracer> wide = make_wide_tracer(flat, mesh, layout);
+    const AnyTracer traced = wide ? AnyTracer(*wide) : AnyTracer(binary);
+    for (RayKind kind : {RayKind::random, RayKind::shadow}) {
+      RaySetConfig cfg;
+      cfg.kind = kind;
+      cfg.count = 3001;
+      const RaySet set = make_ray_set(mesh, binary, cfg);
+      std::vector<Hit> want;
+      std::vector<TraceCounters> counters;
+      trace_rays(traced, set.rays, set.query, want, &counters);  // one call a ray
+      size_t hits = 0;
+      for (const Hit& h : want) hits += h.hit();
+      ASSERT_GT(hits, 0u);
+      ASSERT_LT(hits, want.size());
+      for (size_t per_call : {size_t(0), size_t(1), size_t(7), size_t(16), size_t(17), size_t(1000)}) {
+        std::vector<Hit> got(set.rays.size(), Hit{1.0f, 0.5f, 0.5f, 123456});  // stale: must be overwritten
+        trace_rays(traced, set.rays, set.query, got, nullptr, std::max<size_t>(256, per_call), per_call);
+        for (size_t i = 0; i < want.size(); ++i) {
+          ASSERT_EQ(got[i].hit(), want[i].hit()) << trace_layout_name(layout) << " " << per_call << " ray " << i;
+          if (set.query == RayQuery::closest) {
+            ASSERT_EQ(got[i].triangle_id, want[i].triangle_id) << trace_layout_name(layout) << " " << per_call;
+            ASSERT_EQ(got[i].t, want[i].t);
+          }
+        }
+      }
+    }
+  }
 }
 
 TEST(Trace, ClosedSphereIsWatertightAtEdgesAndVertices) {

@@ -42,6 +42,32 @@ TEST_F(WideCli, TraceEveryLayoutAgreesWithBruteForceAndReportsTheIsa) {
   }
 }
 
+// --rays-per-call times the rays in calls of that many (1: one ray a call) and the JSON and
+// text say so; a bad count is an error naming the option. (That calls of any size give the
+// same hits is Trace.RaysPerCallGiveTheHitsOfOneRayACall's, on the library function.)
+TEST_F(WideCli, TraceTimesRaysInCallsOfTheAskedSize) {
+  const fs::path bvh = dir_ / "s.bvh";
+  ASSERT_EQ(run("build 'builtin?triangles=4000' -o " + bvh.string()).exit_code, 0);
+  for (const char* rays : {"random", "shadow"}) {
+    for (const char* per_call : {"0", "1", "5"}) {
+      CliRun r = run("trace " + bvh.string() + " --scene 'builtin?triangles=4000' --rays " + rays +
+                     " --count 2000 --repeats 1 --json --rays-per-call " + per_call);
+      ASSERT_EQ(r.exit_code, 0) << rays << " " << per_call << ": " << r.err;
+      const auto j = nlohmann::json::parse(r.out);
+      EXPECT_EQ(j["rays_per_call"], std::stoi(per_call));
+      EXPECT_EQ(j["brute_force"]["mismatches"], 0);
+      EXPECT_GT(j["threads_1"]["rays_per_second"].get<double>(), 0.0);
+    }
+  }
+  CliRun text = run("trace " + bvh.string() + " --scene 'builtin?triangles=4000' --rays random --count 500 --repeats 1 "
+                    "--rays-per-call 1");
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_NE(text.out.find("calls of 1 ray\n"), std::string::npos) << text.out;
+  CliRun bad = run("trace " + bvh.string() + " --scene 'builtin?triangles=4000' --rays-per-call -3");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.err.find("--rays-per-call"), std::string::npos) << bad.err;
+}
+
 // --wide-block sets the collapse's c_blk: the layout still traces exactly, the JSON says
 // which cost ran (the library's default when not given), and a dearer leaf block gives a
 // dearer optimal collapse (its cost, nodes + c_blk * blocks, grows with c_blk wherever a

@@ -15,10 +15,12 @@ namespace bvhopt {
 
 // Traces every ray, spread over the threads oneTBB allows (tbb::parallel_for over blocks
 // of `block` rays). For RayQuery::any only triangle_id tells hit (any id) or miss, and the
-// id is of whichever triangle was found first. `counters`, when given, gets one entry per ray.
-// Without `counters` a block is traced in one call (AnyTracer's batch form).
+// id is of whichever triangle was found first. `counters`, when given, gets one entry per ray
+// (traced one call a ray). Without `counters` the rays go to the tracer's batch form in calls
+// of `rays_per_call` rays, or a whole block a call when 0; 1 is what a renderer tracing one
+// ray at a time gets. The hits are the same either way.
 void trace_rays(const AnyTracer& tracer, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits,
-                std::vector<TraceCounters>* counters = nullptr, size_t block = 256);
+                std::vector<TraceCounters>* counters = nullptr, size_t block = 256, size_t rays_per_call = 0);
 void trace_rays(const Tracer& tracer, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits,
                 std::vector<TraceCounters>* counters = nullptr, ChildOrder order = ChildOrder::split_axis,
                 size_t block = 256);
@@ -36,6 +38,8 @@ struct MeasureOptions {
   ChildOrder order = ChildOrder::split_axis;  // for a binary Tracer
   int threads = 0;   // 0: whatever oneTBB allows now; otherwise a tbb::global_control limit
   int repeats = 3;   // timed passes; the median is reported
+  // Rays per tracer call in the timed passes (trace_rays); 0: a block of 256 rays a call.
+  size_t rays_per_call = 0;
 };
 
 struct RayMeasurement {

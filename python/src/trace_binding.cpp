@@ -62,13 +62,15 @@ std::vector<Ray> rays_from(const py::array_t<float, py::array::c_style | py::arr
 
 TraceResult trace(const Tree& tree, const Scene& scene, const py::array_t<float, py::array::c_style | py::array::forcecast>& array,
                   const std::string& layout, const std::string& query, const std::string& order,
-                  std::optional<int> threads, int repeats, std::optional<double> wide_block) {
+                  std::optional<int> threads, int repeats, std::optional<double> wide_block, int rays_per_call) {
   const std::optional<TraceLayout> wide = parse_trace_layout(layout);
   if (!wide) throw Error("trace: unknown layout '" + layout + "' (known: bvh2, bvh4, bvh8)");
   if (query != "closest" && query != "any") throw Error("trace: query must be 'closest' or 'any', got '" + query + "'");
   if (order != "split-axis" && order != "distance") throw Error("trace: order must be 'split-axis' or 'distance', got '" + order + "'");
   if (repeats < 1) throw Error("trace: repeats must be at least 1, got " + std::to_string(repeats));
   if (threads && *threads < 1) throw Error("trace: threads must be at least 1 (or None for all cores)");
+  if (rays_per_call < 0 || rays_per_call > 1000000)
+    throw Error("trace: rays_per_call must be 0 (blocks of 256 rays) to 1000000, got " + std::to_string(rays_per_call));
   if (wide_block && !(std::isfinite(*wide_block) && *wide_block > 0.0)) {
     std::ostringstream m;
     m << "trace: wide_block must be a finite number above 0 (or None for the default, " << WideCostModel{}.block
@@ -81,6 +83,7 @@ TraceResult trace(const Tree& tree, const Scene& scene, const py::array_t<float,
   options.order = order == "distance" ? ChildOrder::distance : ChildOrder::split_axis;
   options.threads = threads.value_or(0);
   options.repeats = repeats;
+  options.rays_per_call = size_t(rays_per_call);
   std::vector<Hit> hits;
   std::vector<TraceCounters> counters;
   RayMeasurement measured;
@@ -138,9 +141,10 @@ void register_trace(py::class_<Tree>& tree) {
       });
   tree.def("trace", &trace, py::arg("scene"), py::arg("rays"), py::arg("layout") = "bvh8", py::arg("query") = "closest",
            py::arg("order") = "split-axis", py::arg("threads") = py::none(), py::arg("repeats") = 3,
-           py::arg("wide_block") = py::none(),
+           py::arg("wide_block") = py::none(), py::arg("rays_per_call") = 0,
            "Traces an n x 8 float32 ray array (see bvhopt.rays) through the tree laid out as `layout`: 'bvh8' (the default, as the command line's), 'bvh4' (wide SIMD nodes, collapsed from the binary tree) or 'bvh2' (binary nodes). "
-           "`wide_block`: the wide collapse's cost of a 4-triangle leaf block (c_blk, as the command line's --wide-block; None: the library's default)");
+           "`wide_block`: the wide collapse's cost of a 4-triangle leaf block (c_blk, as the command line's --wide-block; None: the library's default). "
+           "`rays_per_call`: the timed passes trace the rays in calls of this many (1: one ray a call, as a renderer tracing a ray at a time; 0: blocks of 256), as the command line's --rays-per-call");
   tree.def_static("layouts", [] { return known_layouts(); });
 }
 

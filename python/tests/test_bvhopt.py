@@ -164,6 +164,13 @@ def test_rays_and_trace(cli, tmp_path, scene):
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(bvhopt.Error, match="wide_block"):
             bvh.trace(scene, rays, layout="bvh8", repeats=1, wide_block=bad)
+    # timed in calls of one ray (a renderer's ray at a time): the same per-ray results
+    one = bvh.trace(scene, rays, layout="bvh8", repeats=1, rays_per_call=1)
+    np.testing.assert_array_equal(one.triangle_id, wide.triangle_id)
+    assert one.rays_per_second > 0
+    for bad in (-1, 1000001):
+        with pytest.raises(bvhopt.Error, match="rays_per_call"):
+            bvh.trace(scene, rays, layout="bvh8", repeats=1, rays_per_call=bad)
     bvh.save(tmp_path / "t.bvh")
     ref = run_cli(cli, "trace", str(tmp_path / "t.bvh"), "--scene", SCENE, "--rays", "primary",
                   "--count", "4096", "--seed", "3", "--layout", "bvh2")

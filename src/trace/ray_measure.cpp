@@ -19,7 +19,7 @@
 namespace bvhopt {
 
 void trace_rays(const AnyTracer& tracer, const std::vector<Ray>& rays, RayQuery query, std::vector<Hit>& hits,
-                std::vector<TraceCounters>* counters, size_t block) {
+                std::vector<TraceCounters>* counters, size_t block, size_t rays_per_call) {
   hits.resize(rays.size());
   if (counters) counters->assign(rays.size(), TraceCounters{});
   const Ray* in = rays.data();
@@ -28,8 +28,21 @@ void trace_rays(const AnyTracer& tracer, const std::vector<Ray>& rays, RayQuery 
   tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), std::max<size_t>(block, 1)),
                     [=, &tracer](const tbb::blocked_range<size_t>& r) {
                       TraceCounters scratch;
-                      if (!per_ray && query == RayQuery::closest) {
-                        tracer.closest(in + r.begin(), r.size(), out + r.begin(), scratch);
+                      if (!per_ray) {
+                        const size_t call = rays_per_call ? rays_per_call : r.size();
+                        std::vector<uint8_t> occluded(query == RayQuery::any ? std::min(call, r.size()) : 0);
+                        for (size_t b = r.begin(); b < r.end(); b += call) {
+                          const size_t n = std::min(call, r.end() - b);
+                          if (query == RayQuery::closest) {
+                            tracer.closest(in + b, n, out + b, scratch);
+                          } else {
+                            tracer.any(in + b, n, occluded.data(), scratch);
+                            for (size_t i = 0; i < n; ++i) {
+                              out[b + i] = Hit{};
+                              if (occluded[i]) out[b + i].triangle_id = 0;
+                            }
+                          }
+                        }
                         return;
                       }
                       for (size_t i = r.begin(); i < r.end(); ++i) {
@@ -102,7 +115,7 @@ RayMeasurement measure_rays(const AnyTracer& tracer, const std::vector<Ray>& ray
   std::vector<double> times;
   for (int r = 0; r < std::max(options.repeats, 1); ++r) {
     const auto start = std::chrono::steady_clock::now();
-    trace_rays(tracer, rays, query, hits, nullptr);
+    trace_rays(tracer, rays, query, hits, nullptr, std::max<size_t>(256, options.rays_per_call), options.rays_per_call);
     times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   }
   std::sort(times.begin(), times.end());
