@@ -248,7 +248,7 @@ void register_trace_command(CLI::App& app) {
   cmd->add_option("--rays-per-call", opt->rays_per_call,
                   "Time the rays traced in calls of this many (1: one ray a call, as a renderer tracing a ray at a "
                   "time; 0: blocks of 256 rays)")
-      ->check(CLI::Range(0u, 1000000u))
+      ->check(CLI::Range(size_t(0), kMaxRaysPerCall))
       ->type_name("N")
       ->capture_default_str();
   cmd->add_option("--save-rays", opt->save_rays, "Write the ray set to this ray file")->type_name("FILE");

@@ -34,6 +34,9 @@ struct CountDistribution {
 };
 CountDistribution distribution_of(const std::vector<uint32_t>& values);
 
+// The most rays per call MeasureOptions::rays_per_call, the command line and Python accept.
+inline constexpr size_t kMaxRaysPerCall = 1000000;
+
 struct MeasureOptions {
   ChildOrder order = ChildOrder::split_axis;  // for a binary Tracer
   int threads = 0;   // 0: whatever oneTBB allows now; otherwise a tbb::global_control limit

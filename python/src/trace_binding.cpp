@@ -69,8 +69,9 @@ TraceResult trace(const Tree& tree, const Scene& scene, const py::array_t<float,
   if (order != "split-axis" && order != "distance") throw Error("trace: order must be 'split-axis' or 'distance', got '" + order + "'");
   if (repeats < 1) throw Error("trace: repeats must be at least 1, got " + std::to_string(repeats));
   if (threads && *threads < 1) throw Error("trace: threads must be at least 1 (or None for all cores)");
-  if (rays_per_call < 0 || rays_per_call > 1000000)
-    throw Error("trace: rays_per_call must be 0 (blocks of 256 rays) to 1000000, got " + std::to_string(rays_per_call));
+  if (rays_per_call < 0 || size_t(rays_per_call) > kMaxRaysPerCall)
+    throw Error("trace: rays_per_call must be 0 (blocks of 256 rays) to " + std::to_string(kMaxRaysPerCall) + ", got " +
+                std::to_string(rays_per_call));
   if (wide_block && !(std::isfinite(*wide_block) && *wide_block > 0.0)) {
     std::ostringstream m;
     m << "trace: wide_block must be a finite number above 0 (or None for the default, " << WideCostModel{}.block
