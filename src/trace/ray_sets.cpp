@@ -54,10 +54,14 @@ Vec3 cosine_direction(const Vec3& n, Rng& rng) {
   return normalize(t * (r * std::cos(phi)) + b * (r * std::sin(phi)) + n * z);
 }
 
+// The camera at about `pixels` pixels, its aspect kept; never more than a ray set may hold
+// (rounded to the nearest, 13379x10032 overshot that limit, and the secondary sets, growing
+// their image to it, failed with the camera's error instead of their own).
 Camera with_pixels(Camera cam, double pixels) {
   const double aspect = double(cam.width) / double(std::max<uint32_t>(cam.height, 1));
   const double h = std::max(1.0, std::round(std::sqrt(pixels / aspect)));
-  const double w = std::max(1.0, std::round(pixels / h));
+  double w = std::max(1.0, std::round(pixels / h));
+  if (w * h > double(kMaxRayCount)) w = std::max(1.0, std::floor(double(kMaxRayCount) / h));
   cam.width = static_cast<uint32_t>(std::min(w, 1e5));
   cam.height = static_cast<uint32_t>(std::min(h, 1e5));
   return cam;

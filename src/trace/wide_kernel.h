@@ -655,8 +655,9 @@ inline float initial_limit(const Ray& ray) { return ray.tmax < kLargest ? ray.tm
 
 template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kAny, bool kCompact>
 inline __attribute__((always_inline)) bool traverse(const std::byte* arena, uint32_t root, Stack stack, const Ray& ray,
-                                                    Hit& out, TraceCounters& counters) {
-  const KernelRay r = make_ray<kTest>(ray);
+                                                    Hit& out, TraceCounters& counters, uint32_t any_octant_flip) {
+  KernelRay r = make_ray<kTest>(ray);
+  if constexpr (kAny) r.octant ^= any_octant_flip;
   const auto slab = slab_operands<W>(r);
   BestHit best;
   best.t = initial_limit(ray);
@@ -726,6 +727,7 @@ void trace_interleaved(const Batch& b) {
     if (next_ray == b.count) return false;
     const Ray& ray = b.rays[next_ray];
     l.r = make_ray<kTest>(ray);
+    if constexpr (kAny) l.r.octant ^= b.any_octant_flip;
     l.best = BestHit{};
     l.best.t = initial_limit(ray);
     l.stack.size = 0;
@@ -781,11 +783,12 @@ void trace_range(const Batch& b, size_t begin, size_t end) {
   const Stack stack{b.stack_words, b.stack_t};
   if (b.hits) {
     for (size_t i = begin; i < end; ++i)
-      traverse<W, kTest, kOrder, false, kCompact>(b.arena, b.root, stack, b.rays[i], b.hits[i], c);
+      traverse<W, kTest, kOrder, false, kCompact>(b.arena, b.root, stack, b.rays[i], b.hits[i], c, 0);
   } else {
     Hit h;
     for (size_t i = begin; i < end; ++i)
-      b.any_hits[i] = traverse<W, kTest, kOrder, true, kCompact>(b.arena, b.root, stack, b.rays[i], h, c) ? 1 : 0;
+      b.any_hits[i] =
+          traverse<W, kTest, kOrder, true, kCompact>(b.arena, b.root, stack, b.rays[i], h, c, b.any_octant_flip) ? 1 : 0;
   }
 }
 
@@ -875,10 +878,11 @@ inline void trace_batch(const Batch& b) {
 // which cost about 20 ns a call (staircase's ambient occlusion rays, bvh8, 1 thread: 24
 // Mrays/s traced one call a ray against 46 in calls of thousands).
 template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kAny>
-bool trace_one(const std::byte* arena, uint32_t root, const Ray& ray, Hit& hit, TraceCounters& counters) {
+bool trace_one(const std::byte* arena, uint32_t root, const Ray& ray, Hit& hit, TraceCounters& counters,
+               uint32_t any_octant_flip) {
   alignas(64) uint32_t words[kOneRayStackEntries];
   alignas(64) float t[kOneRayStackEntries];
-  return traverse<W, kTest, kOrder, kAny, false>(arena, root, Stack{words, t}, ray, hit, counters);
+  return traverse<W, kTest, kOrder, kAny, false>(arena, root, Stack{words, t}, ray, hit, counters, any_octant_flip);
 }
 
 template <uint32_t W, TriangleTest kTest, NearFirst kOrder>

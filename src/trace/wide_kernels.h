@@ -40,6 +40,9 @@ struct Batch {
   Hit* hits;          // closest hits
   uint8_t* any_hits;  // 1 where anything is hit
   TraceCounters* counters;
+  // XORed into an any-hit ray's octant: 7 walks the octant order from its far end
+  // (AnyHitOrder::far_first), 0 as closest-hit rays do.
+  uint32_t any_octant_flip;
 };
 
 // Whether rays[0, count) are coherent in the sense of Batch::coherent: of up to 32 pairs of

@@ -44,6 +44,7 @@ static_assert(kMaxTraceLanes == wide_kernels::kMaxLanes);
 
 WideTracer::WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOptions& options)
     : bvh_(bvh, mesh, options.layout), isa_(options.isa ? *options.isa : default_isa()), near_first_(options.near_first),
+      any_octant_flip_(options.any_hit_order == AnyHitOrder::far_first ? 7u : 0u),
       lanes_(options.lanes == 0 ? kMaxTraceLanes : options.lanes),
       scatter_distance_(bvh.nodes.empty() ? 0.0f : wide_kernels::scatter_distance(bvh.nodes[0].box)) {
   if (!isa_supported(isa_)) throw Error("wide tracer: this CPU does not support " + std::string(isa_name(isa_)));
@@ -125,8 +126,8 @@ bool rays_scattered(const Ray* rays, size_t count, float distance) {
 
 namespace {
 template <class Fill>
-void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, uint32_t lanes, float scatter_distance,
-                TraceCounters& counters, Fill&& fill) {
+void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, uint32_t any_octant_flip, uint32_t lanes,
+                float scatter_distance, TraceCounters& counters, Fill&& fill) {
   alignas(64) uint32_t fixed_words[kFixedEntries];
   alignas(64) float fixed_t[kFixedEntries];
   std::vector<uint32_t> heap_words;
@@ -146,6 +147,7 @@ void run_kernel(const WideBvh& bvh, Isa isa, NearFirst order, uint32_t lanes, fl
   b.width = bvh.width();
   b.test = bvh.triangle_test();
   b.near_first = order;
+  b.any_octant_flip = any_octant_flip;
   b.counters = &counters;
   fill(b);
   b.coherent = wide_kernels::rays_coherent(b.rays, b.count);
@@ -162,10 +164,10 @@ constexpr size_t kMaxRaysOneByOne = 16;
 
 void WideTracer::closest(const Ray* rays, size_t count, Hit* hits, TraceCounters& counters) const {
   if (count <= kMaxRaysOneByOne && one_closest_) {
-    for (size_t i = 0; i < count; ++i) one_closest_(bvh_.data(), bvh_.root(), rays[i], hits[i], counters);
+    for (size_t i = 0; i < count; ++i) one_closest_(bvh_.data(), bvh_.root(), rays[i], hits[i], counters, 0);
     return;
   }
-  run_kernel(bvh_, isa_, near_first_, lanes_, scatter_distance_, counters, [&](wide_kernels::Batch& b) {
+  run_kernel(bvh_, isa_, near_first_, any_octant_flip_, lanes_, scatter_distance_, counters, [&](wide_kernels::Batch& b) {
     b.rays = rays;
     b.count = count;
     b.hits = hits;
@@ -175,10 +177,10 @@ void WideTracer::closest(const Ray* rays, size_t count, Hit* hits, TraceCounters
 void WideTracer::any(const Ray* rays, size_t count, uint8_t* hit, TraceCounters& counters) const {
   if (count <= kMaxRaysOneByOne && one_any_) {
     Hit unused;
-    for (size_t i = 0; i < count; ++i) hit[i] = one_any_(bvh_.data(), bvh_.root(), rays[i], unused, counters) ? 1 : 0;
+    for (size_t i = 0; i < count; ++i) hit[i] = one_any_(bvh_.data(), bvh_.root(), rays[i], unused, counters, any_octant_flip_) ? 1 : 0;
     return;
   }
-  run_kernel(bvh_, isa_, near_first_, lanes_, scatter_distance_, counters, [&](wide_kernels::Batch& b) {
+  run_kernel(bvh_, isa_, near_first_, any_octant_flip_, lanes_, scatter_distance_, counters, [&](wide_kernels::Batch& b) {
     b.rays = rays;
     b.count = count;
     b.any_hits = hit;
