@@ -49,6 +49,7 @@ struct TraceOptions {
   uint64_t check = 1000;
   int repeats = 3;
   uint32_t rays_per_call = 0;  // 0: a block of 256 rays a call
+  std::string any_hit_order = "far";
   uint32_t width = 1024, height = 768;
   CameraOptions camera;
   LayoutOption layout;
@@ -101,6 +102,7 @@ void print_trace_json(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
                       {"wide_block_cost", opt.wide_cost.block},
                       {"hit_rate", m1.hit_rate},
                       {"rays_per_call", opt.rays_per_call},
+                      {"any_hit_order", opt.any_hit_order},
                       {"threads_1", {{"seconds", m1.seconds}, {"rays_per_second", m1.rays_per_second}}},
                       {"threads_n", {{"threads", mn.threads}, {"seconds", mn.seconds},
                                      {"rays_per_second", mn.rays_per_second}}},
@@ -122,7 +124,9 @@ void print_trace_text(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
             << "\n"
             << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles)\n"
             << "rays       " << r.set.rays.size() << " " << ray_kind_name(r.set.kind)
-            << (r.set.query == RayQuery::any ? " (any hit)" : " (closest hit)") << ", seed " << r.set.seed << "\n"
+            << (r.set.query == RayQuery::any ? " (any hit" + std::string(tree.wide ? ", " + opt.any_hit_order + " end first" : "") + ")"
+                                             : " (closest hit)")
+            << ", seed " << r.set.seed << "\n"
             << "hit rate   " << format_double(100.0 * m1.hit_rate, 2) << " %\n"
             << "speed      " << format_double(m1.rays_per_second / 1e6, 3) << " Mrays/s on 1 thread, "
             << format_double(mn.rays_per_second / 1e6, 3) << " on " << mn.threads << " (x"
@@ -178,7 +182,7 @@ void run_trace(const TraceOptions& opt) {
   auto threads = opt.threads.apply();
   ProgressLine progress;
   const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout(),
-                                                 opt.wide_cost.model());
+                                                 opt.wide_cost.model(), *parse_any_hit_order(opt.any_hit_order));
   const Mesh& mesh = loaded.mesh;
   const LoadedTree& tree = loaded.tree;
   const ChildOrder order = parse_child_order(opt.order);
@@ -250,6 +254,11 @@ void register_trace_command(CLI::App& app) {
                   "time; 0: blocks of 256 rays)")
       ->check(CLI::Range(size_t(0), kMaxRaysPerCall))
       ->type_name("N")
+      ->capture_default_str();
+  cmd->add_option("--any-hit-order", opt->any_hit_order,
+                  "bvh4 / bvh8: any-hit (shadow) rays search from the ray's far end or its near end, nearest first as "
+                  "closest-hit rays (docs/wide-bvh.md, \"Any-hit rays from the far end\")")
+      ->check(CLI::IsMember({"far", "near"}))
       ->capture_default_str();
   cmd->add_option("--save-rays", opt->save_rays, "Write the ray set to this ray file")->type_name("FILE");
   cmd->add_option("--save-hits", opt->save_hits,

@@ -48,6 +48,9 @@ enum class AnyHitOrder : uint8_t {
   far_first = 0,   // the octant order reversed: the ray's far end first
   near_first = 1,  // as closest-hit rays
 };
+// "far", "near" (the command line's --any-hit-order and Python's any_hit_order).
+std::string_view any_hit_order_name(AnyHitOrder order);
+std::optional<AnyHitOrder> parse_any_hit_order(std::string_view name);
 
 struct WideTracerOptions {
   WideLayoutOptions layout;

@@ -171,6 +171,15 @@ def test_rays_and_trace(cli, tmp_path, scene):
     for bad in (-1, 1000001):
         with pytest.raises(bvhopt.Error, match="rays_per_call"):
             bvh.trace(scene, rays, layout="bvh8", repeats=1, rays_per_call=bad)
+    # any-hit rays from either end: the same answers, walked in other orders
+    shadow = bvhopt.rays(scene, "shadow", count=3000, seed=2, bvh=bvh)
+    far = bvh.trace(scene, shadow, layout="bvh8", query="any", repeats=1)
+    near = bvh.trace(scene, shadow, layout="bvh8", query="any", repeats=1, any_hit_order="near")
+    np.testing.assert_array_equal(far.triangle_id != 0xFFFFFFFF, near.triangle_id != 0xFFFFFFFF)
+    assert 0 < far.hit_rate < 1
+    assert not np.array_equal(far.steps, near.steps)
+    with pytest.raises(bvhopt.Error, match="any_hit_order"):
+        bvh.trace(scene, shadow, layout="bvh8", query="any", repeats=1, any_hit_order="middle")
     bvh.save(tmp_path / "t.bvh")
     ref = run_cli(cli, "trace", str(tmp_path / "t.bvh"), "--scene", SCENE, "--rays", "primary",
                   "--count", "4096", "--seed", "3", "--layout", "bvh2")

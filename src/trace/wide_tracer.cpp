@@ -42,6 +42,16 @@ static_assert(kMaxTraceLanes == wide_kernels::kMaxLanes);
 
 }  // namespace
 
+std::string_view any_hit_order_name(AnyHitOrder order) {
+  return order == AnyHitOrder::near_first ? "near" : "far";
+}
+
+std::optional<AnyHitOrder> parse_any_hit_order(std::string_view name) {
+  for (AnyHitOrder o : {AnyHitOrder::far_first, AnyHitOrder::near_first})
+    if (name == any_hit_order_name(o)) return o;
+  return std::nullopt;
+}
+
 WideTracer::WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOptions& options)
     : bvh_(bvh, mesh, options.layout), isa_(options.isa ? *options.isa : default_isa()), near_first_(options.near_first),
       any_octant_flip_(options.any_hit_order == AnyHitOrder::far_first ? 7u : 0u),
