@@ -439,9 +439,15 @@ nlohmann::json wide_rows(const std::vector<WideTree>& wide, const std::vector<Ra
   for (const WideTree& w : wide) {
     const double mr = mrays(w.name);
     const WideLayoutStats& st = w.tracer->layout().stats();
+    // The work of the query timed: any-hit rays stop at their first hit.
     TraceCounters c;
-    std::vector<Hit> hits(rays.size());
-    w.tracer->closest(rays.data(), rays.size(), hits.data(), c);
+    if (query == RayQuery::any) {
+      std::vector<uint8_t> blocked(rays.size());
+      w.tracer->any(rays.data(), rays.size(), blocked.data(), c);
+    } else {
+      std::vector<Hit> hits(rays.size());
+      w.tracer->closest(rays.data(), rays.size(), hits.data(), c);
+    }
     const double steps = double(c.steps) / double(rays.size()), blocks = double(c.triangle_tests) / 4.0 / double(rays.size());
     std::printf("%-8s %8s %6s | %-16s %7.2f %7s %7s | %7.2f   (wide SAH %.2f, steps %.1f, blocks %.1f%s)\n", "", "", "",
                 w.name.c_str(), mr, "", "", embree_1t > 0 ? mr / embree_1t : 0.0, st.sah_cost, steps, blocks,
