@@ -21,10 +21,10 @@
 // into bvh8 and bvh4 and traced by the wide tracer (the ISA default_isa() picks), the best
 // bvh8 also on 2 threads, beside Embree MEDIUM and HIGH. --wide-variants adds the best bvh8
 // with the other choices: distance-sorted children, the watertight triangle test, the greedy
-// collapse, any-hit rays nearest first ("anynear"; shadow rays), the collapse with c_blk = 0.5, 0.7, 1 and 1.5 (c_node = 1; to recalibrate the
-// default 1 : 0.25 on another CPU; --block-costs C,... traces those c_blk instead, and
-// without --wide-variants only those), every ISA the CPU has, and 1 and 2 rays traced side
-// by side. --fit-costs prints, per row, the wide tracer's nodes and blocks per ray beside its
+// collapse, any-hit rays nearest first ("anynear"; shadow rays), the collapse with c_blk =
+// 0.5, 0.7, 1 and 1.5 (c_node = 1; to recalibrate the default 1 : 0.25 on another CPU;
+// --block-costs C,... traces those c_blk instead, and without --wide-variants only those),
+// every ISA the CPU has, and 1 and 2 rays traced side by side. --fit-costs prints, per row, the wide tracer's nodes and blocks per ray beside its
 // ns/ray, the data the wide cost model is calibrated from. The run ends with each wide
 // tree's geometric mean ratio to Embree MEDIUM over every scene and ray set, per ray set
 // too, and the number of pairs where it is at least 1.
