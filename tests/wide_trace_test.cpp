@@ -528,6 +528,40 @@ TEST(WideTrace, AnyHitRaysFromEitherEndGiveTheSameAnswers) {
   }
 }
 
+// An any-hit ray ends at the first leaf block that hits: eight triangles stacked along z in
+// one leaf of two blocks, every one of them on the ray; closest-hit rays test both blocks.
+TEST(WideTrace, AnyHitRaysStopAtTheFirstBlockThatHits) {
+  Mesh mesh;
+  for (uint32_t k = 0; k < 8; ++k) {
+    const float z = float(k + 1);
+    mesh.add_vertex({-10.0f, -10.0f, z});
+    mesh.add_vertex({10.0f, -10.0f, z});
+    mesh.add_vertex({0.0f, 10.0f, z});
+    mesh.add_triangle(3 * k, 3 * k + 1, 3 * k + 2);
+  }
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::object_median, 8);
+  ASSERT_EQ(flat.nodes.size(), 1u);
+  Ray ray;
+  ray.org = Vec3(0.5f, 0.25f, 0.0f);
+  ray.dir = Vec3(0.0f, 0.0f, 1.0f);
+  ray.tmin = 0.0f;
+  ray.tmax = 100.0f;
+  const std::vector<Ray> rays(300, ray);  // a batch: the side-by-side and coherent kernels too
+  for (const Variant& v : all_variants()) {
+    const WideTracer tracer = make_tracer(flat, mesh, v);
+    TraceCounters closest, any, batch;
+    EXPECT_EQ(tracer.closest(ray, closest).triangle_id, 0u) << v.name();
+    EXPECT_TRUE(tracer.any(ray, any)) << v.name();
+    std::vector<uint8_t> hits(rays.size());
+    tracer.any(rays.data(), rays.size(), hits.data(), batch);
+    EXPECT_EQ(std::count(hits.begin(), hits.end(), 1), long(rays.size())) << v.name();
+    EXPECT_EQ(closest.triangle_tests, 8u) << v.name();
+    EXPECT_EQ(any.triangle_tests, 4u) << v.name();
+    EXPECT_EQ(batch.triangle_tests, 4u * rays.size()) << v.name();
+  }
+}
+
 // A tree whose traversal may need more stack than the per-ray kernel's own (a caterpillar:
 // each inner node a one-triangle leaf and the rest of the row) takes the batch path for
 // single rays too, with the same results.

@@ -573,22 +573,33 @@ inline __attribute__((always_inline)) uint32_t order_children(const typename Wid
 // The blocks of one leaf; whether any gave a closer hit (any hit at all, for any-hit).
 // kPairs: Moller-Trumbore blocks two at a time, where it pays: single rays of incoherent
 // batches (AO +1 to 3 %); in the coherent walk it cost camera rays 1-2 %, in the side-by-side
-// kernel random rays 2-3 %.
-template <TriangleTest kTest, bool kPairs = false>
+// kernel random rays 2-3 %. kAny: stops at the first block with a hit, since any hit ends an
+// any-hit ray; `tests` counts the triangles of the blocks tested.
+template <TriangleTest kTest, bool kPairs = false, bool kAny = false>
 inline __attribute__((always_inline)) bool test_leaf(const std::byte* arena, uint32_t word, const KernelRay& r,
                                                      BestHit& best, uint32_t& tests) {
   const TriangleBlock* blocks = at_unit<TriangleBlock>(arena, word);
   const uint32_t count = ((word >> 27) & 15u) + 1;
-  tests += 4 * count;
+  if constexpr (!kAny) tests += 4 * count;
   bool found = false;
   uint32_t i = 0;
 #if defined(__AVX2__)
-  if constexpr (kPairs && kTest == TriangleTest::moller_trumbore)
+  // Not for any-hit rays: a block at a time, they stop at the first that hits, and count the
+  // same work in every kernel.
+  if constexpr (kPairs && !kAny && kTest == TriangleTest::moller_trumbore)
     for (; i + 1 < count; i += 2) found |= block_pair_moller_trumbore(blocks + i, r, best);
 #endif
-  for (; i < count; ++i)
+  for (; i < count; ++i) {
     found |= kTest == TriangleTest::watertight ? block_watertight(blocks[i], r, best)
                                                : block_moller_trumbore(blocks[i], r, best);
+    if constexpr (kAny) {
+      if (found) {
+        tests += 4 * (i + 1);
+        return true;
+      }
+    }
+  }
+  if constexpr (kAny) tests += 4 * count;
   return found;
 }
 
@@ -675,7 +686,7 @@ inline __attribute__((always_inline)) bool traverse(const std::byte* arena, uint
       // The stack top is what comes after this leaf unless the leaf hits nearer: its fetch
       // overlaps the triangle tests.
       if (stack.size != 0) prefetch_unit(arena, stack.words[stack.size - 1]);
-      const bool hit = test_leaf<kTest, kCompact>(arena, word, r, best, tests);
+      const bool hit = test_leaf<kTest, kCompact, kAny>(arena, word, r, best, tests);
       found |= hit;
       if (kAny && hit) goto done;
       if (hit) limit = node_limit<W>(best.t);
@@ -752,7 +763,7 @@ void trace_interleaved(const Batch& b) {
         next = visit_node<W, kOrder, kCompact>(b.arena, l.word, l.r, l.r, l.best.t, l.stack);
         if (next == kNoWord) next = pop_next(l.stack, l.best.t);
       } else {
-        const bool hit = test_leaf<kTest>(b.arena, l.word, l.r, l.best, tests);
+        const bool hit = test_leaf<kTest, false, kAny>(b.arena, l.word, l.r, l.best, tests);
         l.found |= hit;
         next = kAny && hit ? kNoWord : pop_next(l.stack, l.best.t);
       }
