@@ -4,7 +4,7 @@
 // and the correlation of SAH cost with time per ray across the trees of each scene.
 //
 //   trace_bench [--scenes DIR] [--scene FILE]... [--count N] [--repeats R]
-//               [--kinds primary,random,ao] [--optimizers] [--quick] [--opt-seconds S]
+//               [--kinds primary,random,ao] [--query closest|any] [--optimizers] [--quick] [--opt-seconds S]
 //               [--best-seconds S] [--best-leaf N] [--json FILE]
 //               [--no-wide] [--wide-variants] [--fit-costs] [--baked DIR]
 //
@@ -28,6 +28,10 @@
 // ns/ray, the data the wide cost model is calibrated from. The run ends with each wide
 // tree's geometric mean ratio to Embree MEDIUM over every scene and ray set, per ray set
 // too, and the number of pairs where it is at least 1.
+//
+// --query traces every set as that query (Embree with rtcIntersect1 or rtcOccluded1 to match);
+// a set so changed is named with the query ("ao-any": AO rays as a renderer's occlusion
+// queries). Without it each set keeps its own: any hit for shadow rays, closest for the rest.
 //
 // --batch-sizes N,... adds the first bvh8 row (best-bvh8) traced on 1 thread in calls of N rays
 // each, one call after the other on the calling thread: what a renderer that traces a tile
@@ -91,6 +95,7 @@ struct Options {
   uint64_t count = 1'000'000;
   int repeats = 5;
   std::vector<RayKind> kinds{RayKind::primary, RayKind::random, RayKind::ao};
+  std::optional<RayQuery> query;  // --query: every set traced as this query
   bool optimizers = false;
   bool quick = false;
   bool wall = false;   // 1-thread figures from wall time instead of thread CPU time  // only the leaf-1 sweep tree (for A/B runs while tuning)
@@ -143,9 +148,13 @@ Options parse(int argc, char** argv) {
         if (!kind) throw Error("unknown ray kind '" + k + "'");
         o.kinds.push_back(*kind);
       }
+    } else if (a == "--query") {
+      const std::string q = args.value();
+      if (q != "closest" && q != "any") throw Error("--query: '" + q + "' is not closest or any");
+      o.query = q == "any" ? RayQuery::any : RayQuery::closest;
     } else if (a == "--help" || a == "-h") {
       std::cout << "trace_bench [--scenes DIR] [--scene FILE]... [--count N] [--repeats R]\n"
-                   "            [--kinds primary,random,ao,path,shadow] [--optimizers] [--opt-seconds S]\n"
+                   "            [--kinds primary,random,ao,path,shadow] [--query closest|any] [--optimizers] [--opt-seconds S]\n"
                    "            [--quick] [--wall]   (only the leaf-1 sweep tree and best)\n"
                    "            [--best-seconds S] [--best-leaf N]   (the 'best' row; S = 0 drops it)\n"
                    "            [--json FILE] [--no-wide] [--wide-variants] [--block-costs 0.25,0.35] [--fit-costs]\n"
@@ -623,6 +632,7 @@ int run(const Options& opt) {
       cfg.seed = 1;
       cfg.count = kind == RayKind::primary ? 0 : opt.count;  // primary: 1024 x 768
       cfg.camera = bench_view(scene);
+      cfg.query = opt.query;
       // A scene may have no rays of a kind (shadow rays start only at lit hits; nefertiti's
       // default light lights almost none): that set is skipped, the run goes on.
       RaySet set;
@@ -634,6 +644,9 @@ int run(const Options& opt) {
         continue;
       }
       const std::vector<Ray>& rays = set.rays;
+      const RayQuery own_query = kind == RayKind::shadow ? RayQuery::any : RayQuery::closest;
+      const std::string set_name = std::string(ray_kind_name(kind)) +
+                                   (set.query == own_query ? "" : set.query == RayQuery::any ? "-any" : "-closest");
 
       // Candidates: each tree with the default (split-axis) order on 1 thread; the first tree
       // also with the distance order and on 2 threads; Embree on 1 and 2 threads.
@@ -709,11 +722,12 @@ int run(const Options& opt) {
 #endif
       const double o1 = mrays(trees[0].name), o2 = mrays("ours2"), a1 = mrays("dist");
       std::printf("%-8s %8zu %6.1f | %-16s %7.2f %7.2f %7.2f | %7.2f %7.2f %7.2f %7.2f | %6.2f %6.1f | %6.4f\n",
-                  std::string(ray_kind_name(kind)).c_str(), rays.size(), 100.0 * m.hit_rate, trees[0].name.c_str(),
+                  set_name.c_str(), rays.size(), 100.0 * m.hit_rate, trees[0].name.c_str(),
                   o1, a1, e1, e1 > 0 ? o1 / e1 : 0.0, o2, e2, e2 > 0 ? o2 / e2 : 0.0, o2 / o1, m.steps.mean, agree);
       json row = {{"scene", scene},
                   {"triangles", mesh.triangle_count()},
-                  {"rays", std::string(ray_kind_name(kind))},
+                  {"rays", set_name},
+                  {"query", set.query == RayQuery::any ? "any" : "closest"},
                   {"count", rays.size()},
                   {"hit_rate", m.hit_rate},
                   {"steps_mean", m.steps.mean},

@@ -50,6 +50,8 @@ struct TraceOptions {
   int repeats = 3;
   uint32_t rays_per_call = 0;  // 0: a block of 256 rays a call
   std::string any_hit_order = "far";
+  std::string light;  // shadow rays' point light, X,Y,Z (empty: default_light)
+  std::string query;  // "closest" | "any"; empty: the ray set's own
   uint32_t width = 1024, height = 768;
   CameraOptions camera;
   LayoutOption layout;
@@ -59,18 +61,28 @@ struct TraceOptions {
 // What one run measured, for the report.
 struct TraceResults {
   RaySet set;
+  std::optional<Vec3> light;  // the light of generated shadow rays
   RayMeasurement one_thread, all_threads;
   std::optional<BruteForceCheck> check;
 };
 
-// The rays of a ray file, or a generated set (saved when asked).
-RaySet trace_ray_set(const TraceOptions& opt, const Mesh& mesh, const Tracer& tracer) {
+// The rays of a ray file, or a generated set (saved when asked); `light` gets the light of
+// generated shadow rays.
+RaySet trace_ray_set(const TraceOptions& opt, const Mesh& mesh, const Tracer& tracer, std::optional<Vec3>& light) {
   RaySet set;
   if (!opt.load_rays.empty()) {
+    if (!opt.light.empty())
+      throw Error("--light: the rays of --load-rays " + opt.load_rays + " are traced as saved; --light places the "
+                  "light of generated shadow rays (--rays shadow)");
     set = read_ray_file(opt.load_rays);
   } else {
     RaySetConfig cfg;
     cfg.kind = *parse_ray_kind(opt.rays);
+    if (!opt.light.empty()) {
+      if (cfg.kind != RayKind::shadow)
+        throw Error("--light: only shadow rays have a light; " + opt.rays + " rays do not (use --rays shadow)");
+      cfg.light = CameraOptions::parse(opt.light, "--light");
+    }
     cfg.seed = opt.seed;
     cfg.count = opt.count;
     cfg.width = opt.width;
@@ -78,7 +90,11 @@ RaySet trace_ray_set(const TraceOptions& opt, const Mesh& mesh, const Tracer& tr
     cfg.up_axis = opt.camera.up_axis();
     cfg.camera = opt.camera.resolve(mesh, tracer, opt.width, opt.height);
     set = make_ray_set(mesh, tracer, cfg);
+    if (cfg.kind == RayKind::shadow) light = cfg.light ? *cfg.light : default_light(mesh, cfg.up_axis);
   }
+  // After loading too: a saved AO set can be traced as occlusion queries.
+  if (!opt.query.empty()) set.query = opt.query == "any" ? RayQuery::any : RayQuery::closest;
+  // Saved with the query traced, so that a peer traces the same queries from the file.
   if (!opt.save_rays.empty()) write_ray_file(opt.save_rays, set);
   if (set.rays.empty()) throw Error("trace: the ray set is empty");
   return set;
@@ -108,6 +124,7 @@ void print_trace_json(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
                                      {"rays_per_second", mn.rays_per_second}}},
                       {"steps", distribution_json(m1.steps)},
                       {"triangle_tests", distribution_json(m1.triangle_tests)}};
+  if (r.light) j["light"] = {r.light->x, r.light->y, r.light->z};
   if (r.check) j["brute_force"] = {{"checked", r.check->checked}, {"mismatches", r.check->mismatches},
                                    {"first_mismatch", r.check->first_mismatch}};
   print_json(j);
@@ -126,7 +143,11 @@ void print_trace_text(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
             << "rays       " << r.set.rays.size() << " " << ray_kind_name(r.set.kind)
             << (r.set.query == RayQuery::any ? " (any hit" + std::string(tree.wide ? ", " + opt.any_hit_order + " end first" : "") + ")"
                                              : " (closest hit)")
-            << ", seed " << r.set.seed << "\n"
+            << ", seed " << r.set.seed
+            << (r.light ? ", light at (" + format_double(r.light->x, 4) + ", " + format_double(r.light->y, 4) + ", " +
+                              format_double(r.light->z, 4) + ")"
+                        : std::string())
+            << "\n"
             << "hit rate   " << format_double(100.0 * m1.hit_rate, 2) << " %\n"
             << "speed      " << format_double(m1.rays_per_second / 1e6, 3) << " Mrays/s on 1 thread, "
             << format_double(mn.rays_per_second / 1e6, 3) << " on " << mn.threads << " (x"
@@ -190,7 +211,7 @@ void run_trace(const TraceOptions& opt) {
 
   progress.update("making " + opt.rays + " rays", true);
   TraceResults r;
-  r.set = trace_ray_set(opt, mesh, *tree.tracer);
+  r.set = trace_ray_set(opt, mesh, *tree.tracer, r.light);
   const RaySet& set = r.set;
   if (!opt.save_hits.empty()) {
     progress.update("saving the hits of " + std::to_string(set.rays.size()) + " rays", true);
@@ -260,6 +281,14 @@ void register_trace_command(CLI::App& app) {
                   "closest-hit rays (docs/wide-bvh.md, \"Any-hit rays from the far end\")")
       ->check(CLI::IsMember({"far", "near"}))
       ->capture_default_str();
+  cmd->add_option("--light", opt->light,
+                  "Shadow rays: the point light they go to (default: above the centre of the scene's box by 0.4 of its "
+                  "height)")
+      ->type_name("X,Y,Z");
+  cmd->add_option("--query", opt->query,
+                  "Trace the rays as closest-hit or any-hit (occlusion) queries (default: any for shadow rays, closest "
+                  "for the others and as a ray file says; any for AO rays is what a renderer traces)")
+      ->check(CLI::IsMember({"closest", "any"}));
   cmd->add_option("--save-rays", opt->save_rays, "Write the ray set to this ray file")->type_name("FILE");
   cmd->add_option("--save-hits", opt->save_hits,
                   "Write each ray's hit (triangle id and t, u, v as hex floats, or miss) to this text file")

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "bvhopt/ray_file.h"
 #include "bvhopt/wide_tracer.h"
 #include "test_support.h"
 
@@ -95,6 +96,74 @@ TEST_F(WideCli, TraceSearchesAnyHitRaysFromTheEndAskedFor) {
   CliRun bad = run("trace " + bvh.string() + scene + " --rays shadow --any-hit-order middle");
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_NE(bad.err.find("--any-hit-order"), std::string::npos) << bad.err;
+}
+
+// --light places the shadow rays' light: every saved ray ends there, the JSON reports it
+// (the default one too, where the default rays end), and moving it changes what is lit.
+// --query traces any set as closest-hit or any-hit queries: the same rays hit or miss
+// either way, brute force agrees, and a saved file carries the query that was traced.
+TEST_F(WideCli, TraceTakesTheShadowLightAndTheQuery) {
+  const fs::path bvh = dir_ / "s.bvh";
+  const std::string scene = " --scene 'builtin?triangles=4000'";
+  ASSERT_EQ(run("build 'builtin?triangles=4000' -o " + bvh.string()).exit_code, 0);
+  const std::string shadow = "trace " + bvh.string() + scene + " --rays shadow --count 2000 --check 2000 --repeats 1 --json";
+  auto ends_at = [](const fs::path& file, const bvhopt::Vec3& light) {
+    const bvhopt::RaySet set = bvhopt::read_ray_file(file);
+    EXPECT_EQ(set.query, bvhopt::RayQuery::any);
+    size_t far = 0;
+    for (const bvhopt::Ray& r : set.rays)
+      if (bvhopt::length(r.org + r.dir - light) > 1e-3f * (1.0f + bvhopt::length(light))) ++far;
+    return set.rays.size() == 2000 && far == 0;
+  };
+  double hit_rate[2];
+  for (int i = 0; i < 2; ++i) {
+    const fs::path rays = dir_ / ("shadow" + std::to_string(i) + ".rays");
+    CliRun r = run(shadow + " --save-rays " + rays.string() + (i ? " --light 0.5,40,-0.25" : ""));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["brute_force"]["mismatches"], 0);
+    ASSERT_TRUE(j.contains("light")) << r.out;
+    const bvhopt::Vec3 light(j["light"][0].get<float>(), j["light"][1].get<float>(), j["light"][2].get<float>());
+    if (i) {
+      EXPECT_EQ(light, bvhopt::Vec3(0.5f, 40.0f, -0.25f));
+    }
+    EXPECT_TRUE(ends_at(rays, light)) << (i ? "given" : "default") << " light";
+    hit_rate[i] = j["hit_rate"].get<double>();
+  }
+  EXPECT_NE(hit_rate[0], hit_rate[1]);
+
+  const std::string ao = "trace " + bvh.string() + scene + " --rays ao --count 3000 --check 3000 --repeats 1 --json";
+  const fs::path any_rays = dir_ / "ao_any.rays";
+  CliRun closest = run(ao), any = run(ao + " --query any --save-rays " + any_rays.string());
+  ASSERT_EQ(closest.exit_code, 0) << closest.err;
+  ASSERT_EQ(any.exit_code, 0) << any.err;
+  const auto jc = nlohmann::json::parse(closest.out), ja = nlohmann::json::parse(any.out);
+  EXPECT_EQ(jc["query"], "closest");
+  EXPECT_EQ(ja["query"], "any");
+  EXPECT_FALSE(ja.contains("light"));
+  EXPECT_EQ(ja["brute_force"]["mismatches"], 0);
+  EXPECT_GT(jc["hit_rate"].get<double>(), 0.0);
+  EXPECT_EQ(ja["hit_rate"], jc["hit_rate"]);
+  EXPECT_NE(ja["triangle_tests"]["mean"], jc["triangle_tests"]["mean"]);  // any hit stops at the first
+  EXPECT_EQ(bvhopt::read_ray_file(any_rays).query, bvhopt::RayQuery::any);
+  CliRun back = run("trace " + bvh.string() + scene + " --load-rays " + any_rays.string() +
+                    " --query closest --check 3000 --repeats 1 --json");
+  ASSERT_EQ(back.exit_code, 0) << back.err;
+  const auto jb = nlohmann::json::parse(back.out);
+  EXPECT_EQ(jb["query"], "closest");
+  EXPECT_EQ(jb["hit_rate"], jc["hit_rate"]);
+  EXPECT_EQ(jb["triangle_tests"]["mean"], jc["triangle_tests"]["mean"]);
+
+  struct Bad { std::string args, says; };
+  for (const Bad& bad : {Bad{" --rays ao --light 1,2,3", "only shadow rays have a light"},
+                         Bad{" --load-rays " + any_rays.string() + " --light 1,2,3", "--load-rays"},
+                         Bad{" --rays shadow --light 1,2", "'1,2' is not X,Y,Z"},
+                         Bad{" --rays shadow --light nan,1,2", "--light"},
+                         Bad{" --rays shadow --query first", "--query"}}) {
+    CliRun r = run("trace " + bvh.string() + scene + " --count 100 --repeats 1" + bad.args);
+    EXPECT_NE(r.exit_code, 0) << bad.args;
+    EXPECT_NE(r.err.find(bad.says), std::string::npos) << bad.args << ": " << r.err;
+  }
 }
 
 // --wide-block sets the collapse's c_blk: the layout still traces exactly, the JSON says

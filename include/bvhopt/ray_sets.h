@@ -76,8 +76,12 @@ struct RaySetConfig {
   int up_axis = 1;                // for the default camera and the default light
   uint32_t ao_rays_per_hit = 10;  // N in Bittner's paper
   float ao_length_fraction = 0.1f;  // AO ray length as a fraction of the scene box diagonal
-  // Point light of the shadow rays. Default: above the box centre, 40% of the box height up.
+  // Point light of the shadow rays (default_light when not given). A point that is not
+  // finite is an Error; one inside a closed mesh lights only what is inside with it.
   std::optional<Vec3> light;
+  // The query the set is traced with. Default: any hit for shadow rays, closest hit for the
+  // others. Any hit for AO rays traces them as a renderer's occlusion queries do.
+  std::optional<RayQuery> query;
 };
 
 struct RaySet {
@@ -87,6 +91,10 @@ struct RaySet {
   uint32_t width = 0, height = 0;      // primary rays: the image they make; others 0
   std::vector<Ray> rays;
 };
+
+// The shadow rays' light when none is given: above the centre of the scene's box by 40 % of
+// its extent along the up axis (inside the box, so that interiors are lit from within).
+Vec3 default_light(const Mesh& mesh, int up_axis = 1);
 
 // Deterministic in the mesh and config only (the same rays on any thread count). The
 // tracer is used to find the hits that ao, shadow and path rays start from.

@@ -180,6 +180,15 @@ def test_rays_and_trace(cli, tmp_path, scene):
     assert not np.array_equal(far.steps, near.steps)
     with pytest.raises(bvhopt.Error, match="any_hit_order"):
         bvh.trace(scene, shadow, layout="bvh8", query="any", repeats=1, any_hit_order="middle")
+    # a light of one's own: every shadow ray ends there, and another light lights other hits
+    light = (0.5, 40.0, -0.25)
+    lit = bvhopt.rays(scene, "shadow", count=3000, seed=2, bvh=bvh, light=light)
+    np.testing.assert_allclose(lit[:, 0:3] + lit[:, 4:7], np.broadcast_to(light, (3000, 3)), atol=1e-3)
+    assert bvh.trace(scene, lit, layout="bvh8", query="any", repeats=1).hit_rate != far.hit_rate
+    with pytest.raises(bvhopt.Error, match="only shadow rays have a light"):
+        bvhopt.rays(scene, "ao", count=100, light=light)
+    with pytest.raises(bvhopt.Error, match="not a finite point"):
+        bvhopt.rays(scene, "shadow", count=100, light=(0.0, float("nan"), 0.0))
     bvh.save(tmp_path / "t.bvh")
     ref = run_cli(cli, "trace", str(tmp_path / "t.bvh"), "--scene", SCENE, "--rays", "primary",
                   "--count", "4096", "--seed", "3", "--layout", "bvh2")

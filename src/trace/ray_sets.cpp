@@ -239,8 +239,7 @@ std::vector<Ray> secondary_rays(const Mesh& mesh, const Tracer& tracer, const Ra
   if (config.kind == RayKind::ao) per_pixel = std::max<uint32_t>(config.ao_rays_per_hit, 1);
   if (config.kind == RayKind::path) per_pixel = 3;
   const float ao_length = config.ao_length_fraction * diagonal;
-  const Vec3 light = config.light ? *config.light
-                                  : box.center() + axis_vector(config.up_axis, 0.4f * box.extent()[config.up_axis]);
+  const Vec3 light = config.light ? *config.light : default_light(mesh, config.up_axis);
 
   auto emit = [&](const Ray& primary, const Hit& h, const Triangle& tri, const Vec3& n, Rng& rng, Ray* out) -> uint32_t {
     const Vec3 p = hit_point(tri, h) + n * offset;
@@ -309,14 +308,24 @@ std::vector<Ray> secondary_rays(const Mesh& mesh, const Tracer& tracer, const Ra
 
 }  // namespace
 
+Vec3 default_light(const Mesh& mesh, int up_axis) {
+  const Box box = mesh_bounds(mesh);
+  return box.center() + axis_vector(up_axis, 0.4f * box.extent()[up_axis]);
+}
+
 RaySet make_ray_set(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& config) {
   if (config.count > kMaxRayCount)
     throw Error(std::string(ray_kind_name(config.kind)) + " rays: count " + std::to_string(config.count) +
                 " is above the limit of " + std::to_string(kMaxRayCount) + " rays in one set");
+  if (config.light && !(std::isfinite(config.light->x) && std::isfinite(config.light->y) &&
+                        std::isfinite(config.light->z)))
+    throw Error(std::string(ray_kind_name(config.kind)) + " rays: the light (" + std::to_string(config.light->x) +
+                ", " + std::to_string(config.light->y) + ", " + std::to_string(config.light->z) +
+                ") is not a finite point");
   RaySet set;
   set.kind = config.kind;
   set.seed = config.seed;
-  set.query = config.kind == RayKind::shadow ? RayQuery::any : RayQuery::closest;
+  set.query = config.query ? *config.query : config.kind == RayKind::shadow ? RayQuery::any : RayQuery::closest;
   if (config.kind == RayKind::random) {
     // No camera: a scene the default camera cannot frame (a single point) still gets its
     // own error from random_rays.
