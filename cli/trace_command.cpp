@@ -66,23 +66,27 @@ struct TraceResults {
   std::optional<BruteForceCheck> check;
 };
 
+// --light, checked before anything loads: the point, for generated shadow rays only.
+std::optional<Vec3> asked_light(const TraceOptions& opt) {
+  if (opt.light.empty()) return std::nullopt;
+  if (!opt.load_rays.empty())
+    throw Error("--light: the rays of --load-rays " + opt.load_rays + " are traced as saved; --light places the "
+                "light of generated shadow rays (--rays shadow)");
+  if (opt.rays != "shadow")
+    throw Error("--light: only shadow rays have a light; " + opt.rays + " rays do not (use --rays shadow)");
+  return CameraOptions::parse(opt.light, "--light");
+}
+
 // The rays of a ray file, or a generated set (saved when asked); `light` gets the light of
 // generated shadow rays.
 RaySet trace_ray_set(const TraceOptions& opt, const Mesh& mesh, const Tracer& tracer, std::optional<Vec3>& light) {
   RaySet set;
   if (!opt.load_rays.empty()) {
-    if (!opt.light.empty())
-      throw Error("--light: the rays of --load-rays " + opt.load_rays + " are traced as saved; --light places the "
-                  "light of generated shadow rays (--rays shadow)");
     set = read_ray_file(opt.load_rays);
   } else {
     RaySetConfig cfg;
     cfg.kind = *parse_ray_kind(opt.rays);
-    if (!opt.light.empty()) {
-      if (cfg.kind != RayKind::shadow)
-        throw Error("--light: only shadow rays have a light; " + opt.rays + " rays do not (use --rays shadow)");
-      cfg.light = CameraOptions::parse(opt.light, "--light");
-    }
+    cfg.light = asked_light(opt);
     cfg.seed = opt.seed;
     cfg.count = opt.count;
     cfg.width = opt.width;
@@ -200,6 +204,7 @@ void save_hits(const std::string& path, const AnyTracer& traced, const RaySet& s
 // brute force, and reports; throws Error when traversal and brute force disagree.
 void run_trace(const TraceOptions& opt) {
   if (!opt.save_rays.empty()) check_output_path(opt.save_rays, "--save-rays");
+  asked_light(opt);
   auto threads = opt.threads.apply();
   ProgressLine progress;
   const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout(),
