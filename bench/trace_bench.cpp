@@ -644,9 +644,9 @@ int run(const Options& opt) {
         continue;
       }
       const std::vector<Ray>& rays = set.rays;
-      const RayQuery own_query = kind == RayKind::shadow ? RayQuery::any : RayQuery::closest;
-      const std::string set_name = std::string(ray_kind_name(kind)) +
-                                   (set.query == own_query ? "" : set.query == RayQuery::any ? "-any" : "-closest");
+      const std::string set_name =
+          std::string(ray_kind_name(kind)) +
+          (set.query == default_query(kind) ? "" : set.query == RayQuery::any ? "-any" : "-closest");
 
       // Candidates: each tree with the default (split-axis) order on 1 thread; the first tree
       // also with the distance order and on 2 threads; Embree on 1 and 2 threads.

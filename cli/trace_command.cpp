@@ -77,16 +77,17 @@ std::optional<Vec3> asked_light(const TraceOptions& opt) {
   return CameraOptions::parse(opt.light, "--light");
 }
 
-// The rays of a ray file, or a generated set (saved when asked); `light` gets the light of
-// generated shadow rays.
-RaySet trace_ray_set(const TraceOptions& opt, const Mesh& mesh, const Tracer& tracer, std::optional<Vec3>& light) {
+// The rays of a ray file, or a generated set (saved when asked) with `asked` (asked_light)
+// as its light; `light` gets the light of generated shadow rays.
+RaySet trace_ray_set(const TraceOptions& opt, const Mesh& mesh, const Tracer& tracer, const std::optional<Vec3>& asked,
+                     std::optional<Vec3>& light) {
   RaySet set;
   if (!opt.load_rays.empty()) {
     set = read_ray_file(opt.load_rays);
   } else {
     RaySetConfig cfg;
     cfg.kind = *parse_ray_kind(opt.rays);
-    cfg.light = asked_light(opt);
+    cfg.light = asked;
     cfg.seed = opt.seed;
     cfg.count = opt.count;
     cfg.width = opt.width;
@@ -204,7 +205,7 @@ void save_hits(const std::string& path, const AnyTracer& traced, const RaySet& s
 // brute force, and reports; throws Error when traversal and brute force disagree.
 void run_trace(const TraceOptions& opt) {
   if (!opt.save_rays.empty()) check_output_path(opt.save_rays, "--save-rays");
-  asked_light(opt);
+  const std::optional<Vec3> light = asked_light(opt);
   auto threads = opt.threads.apply();
   ProgressLine progress;
   const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout(),
@@ -216,7 +217,7 @@ void run_trace(const TraceOptions& opt) {
 
   progress.update("making " + opt.rays + " rays", true);
   TraceResults r;
-  r.set = trace_ray_set(opt, mesh, *tree.tracer, r.light);
+  r.set = trace_ray_set(opt, mesh, *tree.tracer, light, r.light);
   const RaySet& set = r.set;
   if (!opt.save_hits.empty()) {
     progress.update("saving the hits of " + std::to_string(set.rays.size()) + " rays", true);

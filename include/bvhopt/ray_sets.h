@@ -92,6 +92,10 @@ struct RaySet {
   std::vector<Ray> rays;
 };
 
+// The query a ray set is traced with unless RaySetConfig::query says otherwise: any hit for
+// shadow rays, closest hit for the others.
+RayQuery default_query(RayKind kind);
+
 // The shadow rays' light when none is given: above the centre of the scene's box by 40 % of
 // its extent along the up axis (inside the box, so that interiors are lit from within).
 Vec3 default_light(const Mesh& mesh, int up_axis = 1);

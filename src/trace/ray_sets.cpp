@@ -308,6 +308,8 @@ std::vector<Ray> secondary_rays(const Mesh& mesh, const Tracer& tracer, const Ra
 
 }  // namespace
 
+RayQuery default_query(RayKind kind) { return kind == RayKind::shadow ? RayQuery::any : RayQuery::closest; }
+
 Vec3 default_light(const Mesh& mesh, int up_axis) {
   const Box box = mesh_bounds(mesh);
   return box.center() + axis_vector(up_axis, 0.4f * box.extent()[up_axis]);
@@ -325,7 +327,7 @@ RaySet make_ray_set(const Mesh& mesh, const Tracer& tracer, const RaySetConfig& 
   RaySet set;
   set.kind = config.kind;
   set.seed = config.seed;
-  set.query = config.query ? *config.query : config.kind == RayKind::shadow ? RayQuery::any : RayQuery::closest;
+  set.query = config.query ? *config.query : default_query(config.kind);
   if (config.kind == RayKind::random) {
     // No camera: a scene the default camera cannot frame (a single point) still gets its
     // own error from random_rays.
