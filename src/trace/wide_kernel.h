@@ -523,7 +523,7 @@ inline __attribute__((always_inline)) uint32_t entered_last(uint32_t mask, const
 // walk below keeps the octant's order: there the rule cost coherent shadow rays 10-20 %
 // (the CPU no longer fetched the next child on a predicted branch), and sorting every
 // entered child by distance had cost shadow rays 15-20 % (docs/wide-bvh.md).
-template <uint32_t W, NearFirst kOrder, bool kCompact, bool kAny>
+template <uint32_t W, NearFirst kOrder, bool kCompact>
 inline __attribute__((always_inline)) uint32_t order_children(const typename WideNode<W>::Node& n, uint32_t octant,
                                                               uint32_t mask, const float* tnear, Stack& stack,
                                                               bool far_end_first) {
@@ -557,11 +557,9 @@ inline __attribute__((always_inline)) uint32_t order_children(const typename Wid
       const __m256i far_first =
           _mm256_and_si256(_mm256_srlv_epi32(_mm256_set1_epi32(int(n.octant_order[octant])), shifts), _mm256_set1_epi32(7));
       uint32_t first = 0;
-      if constexpr (kAny) {
-        if (far_end_first) {
-          first = entered_last(mask, tnear);
-          mask &= ~(1u << first);
-        }
+      if (far_end_first) {
+        first = entered_last(mask, tnear);
+        mask &= ~(1u << first);
       }
       const __mmask8 entered = _mm256_movepi32_mask(_mm256_permutexvar_epi32(far_first, _mm256_movm_epi32(__mmask8(mask))));
       const __m256i words = _mm256_maskz_compress_epi32(
@@ -570,11 +568,9 @@ inline __attribute__((always_inline)) uint32_t order_children(const typename Wid
       const uint32_t count = uint32_t(__builtin_popcount(entered));
       _mm256_storeu_si256(reinterpret_cast<__m256i*>(stack.words + stack.size), words);
       _mm256_storeu_ps(stack.t + stack.size, dist);
-      if constexpr (kAny) {
-        if (far_end_first) {
-          stack.size += count;
-          return n.child[first];
-        }
+      if (far_end_first) {
+        stack.size += count;
+        return n.child[first];
       }
       stack.size += count - 1;
       return uint32_t(_mm_cvtsi128_si32(
@@ -591,11 +587,9 @@ inline __attribute__((always_inline)) uint32_t order_children(const typename Wid
       const __m256i far_first =
           _mm256_and_si256(_mm256_srlv_epi32(_mm256_set1_epi32(int(n.octant_order[octant])), shifts), _mm256_set1_epi32(7));
       uint32_t first = 0;
-      if constexpr (kAny) {
-        if (far_end_first) {
-          first = entered_last(mask, tnear);
-          mask &= ~(1u << first);
-        }
+      if (far_end_first) {
+        first = entered_last(mask, tnear);
+        mask &= ~(1u << first);
       }
       const __m256i flags = _mm256_slli_epi32(_mm256_srlv_epi32(_mm256_set1_epi32(int(mask)), far_first), 31);
       const uint32_t entered = uint32_t(_mm256_movemask_ps(_mm256_castsi256_ps(flags)));
@@ -607,11 +601,9 @@ inline __attribute__((always_inline)) uint32_t order_children(const typename Wid
       const uint32_t count = uint32_t(__builtin_popcount(entered));
       _mm256_storeu_si256(reinterpret_cast<__m256i*>(stack.words + stack.size), words);
       _mm256_storeu_ps(stack.t + stack.size, dist);
-      if constexpr (kAny) {
-        if (far_end_first) {
-          stack.size += count;
-          return n.child[first];
-        }
+      if (far_end_first) {
+        stack.size += count;
+        return n.child[first];
       }
       stack.size += count - 1;
       return stack.words[stack.size];
@@ -680,8 +672,9 @@ inline __attribute__((always_inline)) auto slab_operands(const KernelRay& r) {
 // when the ray enters none). `slab`: r's slab_operands, or r itself. far_end_first: an
 // any-hit ray searching from its far end (AnyHitOrder::far_first, its octant then flipped;
 // see order_children); a parameter rather than a KernelRay field, so that the closest-hit
-// kernels, where it is the constant false, keep their ray as it was.
-template <uint32_t W, NearFirst kOrder, bool kCompact, bool kAny, class Slab, class Limit>
+// kernels, which pass the constant false (inlined, the rule compiles away), keep their ray
+// as it was.
+template <uint32_t W, NearFirst kOrder, bool kCompact, class Slab, class Limit>
 inline __attribute__((always_inline)) uint32_t visit_node(const std::byte* arena, uint32_t word, const KernelRay& r,
                                                           const Slab& slab, Limit limit, Stack& stack,
                                                           bool far_end_first) {
@@ -697,7 +690,7 @@ inline __attribute__((always_inline)) uint32_t visit_node(const std::byte* arena
   const uint32_t mask = slab_test(n.bounds, slab, limit, tnear);
   if (mask == 0) return kNoWord;
   if ((mask & (mask - 1)) == 0) return n.child[lowest_bit_index(mask)];  // one child: no stack traffic
-  const uint32_t next = order_children<W, kOrder, kCompact, kAny>(n, r.octant, mask, tnear, stack, far_end_first);
+  const uint32_t next = order_children<W, kOrder, kCompact>(n, r.octant, mask, tnear, stack, far_end_first);
   // The next nearest child, pushed just now: popped as soon as the nearest one's subtree is
   // done, often after a step or two in a wide tree.
   prefetch_unit(arena, stack.words[stack.size - 1]);
@@ -742,7 +735,7 @@ inline __attribute__((always_inline)) bool traverse(const std::byte* arena, uint
   for (;;) {
     while (!(word & kWideLeafFlag)) {
       ++steps;
-      word = visit_node<W, kOrder, kCompact, kAny>(arena, word, r, slab, limit, stack, far_end_first);
+      word = visit_node<W, kOrder, kCompact>(arena, word, r, slab, limit, stack, far_end_first);
     }
     if (word != kNoWord) {
       ++steps;
@@ -823,7 +816,7 @@ void trace_interleaved(const Batch& b) {
       uint32_t next;
       if (!(l.word & kWideLeafFlag)) {
         // The ray's own scalars, broadcast per node (see SlabRay8).
-        next = visit_node<W, kOrder, kCompact, kAny>(b.arena, l.word, l.r, l.r, l.best.t, l.stack,
+        next = visit_node<W, kOrder, kCompact>(b.arena, l.word, l.r, l.r, l.best.t, l.stack,
                                                       kAny && b.any_octant_flip != 0);
         if (next == kNoWord) next = pop_next(l.stack, l.best.t);
       } else {
