@@ -23,7 +23,8 @@
 // into leaves as bake does (ocost); per scene, the split and the unsplit start of least
 // ocost (what bake --quality best keeps, with sbvh and with sweep) side by side:
 // references per triangle, cost, build time and rays per second of the collapsed tree in
-// the bvh8 layout (primary and random rays made once per scene from the sweep tree, the same
+// the bvh8 layout (primary and random rays made once per scene from the sweep tree, and as
+// many isotropic random lines through the scene's box, the rays the SAH assumes; the same
 // for all; --ray-threads threads, default 1; the trees traced in turn, pass after pass,
 // median of --ray-passes passes, default 11, CPU time over the thread count, with the
 // passes' interquartile range), and the work per ray that load does not change: traversal
@@ -41,6 +42,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -55,6 +57,7 @@
 #include "bvhopt/error.h"
 #include "bvhopt/finalize.h"
 #include "bvhopt/insertion_optimizer.h"
+#include "bvhopt/random_stream.h"
 #include "bvhopt/ray_measure.h"
 #include "bvhopt/ray_sets.h"
 #include "bvhopt/scene_file.h"
@@ -392,6 +395,44 @@ struct Variant {
   uint32_t spatial_max = 0;  // 256: its starts with spatial splits only in small nodes
 };
 
+// Isotropic random lines through the scene's box, the rays the SAH's cost model assumes: the
+// probability that such a line meets a convex box inside is that box's area over the scene
+// box's (Cauchy-Crofton). Drawn as a point uniform on the box's surface by area, with a
+// direction cosine-distributed about the face's inward normal, unbounded. The random set
+// (segments between two points of the box) is a different distribution wherever the box is
+// flat: classroom's is 221 x 3.2 x 221, so its segments run almost level (the vertical part of
+// their direction averages 1.4 % of its length) and weigh the trees' vertical faces.
+std::vector<Ray> sah_lines(const Box& box, size_t count, uint64_t seed) {
+  const Vec3 e = box.extent();
+  const double face[3] = {double(e.y) * e.z, double(e.x) * e.z, double(e.x) * e.y};  // area of a face normal to x, y, z
+  const double total = face[0] + face[1] + face[2];
+  std::vector<Ray> rays(count);
+  if (!(total > 0.0)) return {};
+  RandomStream rng{seed * kGoldenGamma};
+  for (Ray& r : rays) {
+    double pick = rng.open_uniform() * total;
+    int axis = 0;
+    while (axis < 2 && pick >= face[axis]) pick -= face[axis++];
+    const bool high = rng.below(2) == 1;
+    float p[3] = {box.min.x + e.x * rng.uniform_float(), box.min.y + e.y * rng.uniform_float(),
+                  box.min.z + e.z * rng.uniform_float()};
+    const float bmin[3] = {box.min.x, box.min.y, box.min.z}, bmax[3] = {box.max.x, box.max.y, box.max.z};
+    p[axis] = high ? bmax[axis] : bmin[axis];
+    // Cosine-distributed about the inward normal: its component along the axis is sqrt(1 - u).
+    const float u = rng.uniform_float(), phi = 2.0f * 3.14159265f * rng.uniform_float();
+    const float along = std::sqrt(1.0f - u), across = std::sqrt(u);
+    float d[3];
+    d[axis] = high ? -along : along;
+    d[(axis + 1) % 3] = across * std::cos(phi);
+    d[(axis + 2) % 3] = across * std::sin(phi);
+    r.org = Vec3(p[0], p[1], p[2]);
+    r.dir = Vec3(d[0], d[1], d[2]);
+    r.tmin = 0.0f;
+    r.tmax = std::numeric_limits<float>::infinity();
+  }
+  return rays;
+}
+
 nlohmann::json compare_scene(const Options& opt, const std::string& spec, float angle) {
   const CostModel cost = opt.cost;
   Mesh mesh = load_scene(spec);
@@ -409,7 +450,9 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
                               {"sbvh-l8-m256", BuilderKind::spatial_split, false, 8, 256},
                               {"sbvh+evh", BuilderKind::spatial_split, true}};
   constexpr size_t kVariants = std::size(variants);
-  std::vector<Ray> rays[2];
+  // Primary, random, and the SAH's isotropic lines.
+  constexpr int kSets = 3;
+  std::vector<Ray> rays[kSets];
   std::vector<std::unique_ptr<WideTracer>> tracers;
   std::vector<double> ocosts;
   nlohmann::json out = nlohmann::json::array();
@@ -451,6 +494,7 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
         rc.seed = 1;
         rays[k] = make_ray_set(mesh, tracer, rc).rays;
       }
+      rays[2] = sah_lines(mesh_bounds(mesh), rays[1].size(), 1);
     }
     WideTracerOptions wo;
     wo.layout.collapse.width = 8;
@@ -469,21 +513,21 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
   // change in the machine's load falls on all of them alike; each figure is the median of
   // its passes. On this shared VM one tree's rate moved by up to 76 % between two runs of
   // three back-to-back passes each, which flipped most split-against-unsplit verdicts.
-  std::vector<double> rates[kVariants][2];
-  double steps[kVariants][2], tests[kVariants][2];
+  std::vector<double> rates[kVariants][kSets];
+  double steps[kVariants][kSets], tests[kVariants][kSets];
   {
     ThreadLimit trace_limit(opt.ray_threads);
     // The work per ray, which does not depend on the machine's load: traversal steps
     // (nodes visited) and triangle tests, from one counting pass.
     for (size_t v = 0; v < kVariants; ++v)
-      for (int k = 0; k < 2; ++k) {
+      for (int k = 0; k < kSets; ++k) {
         const RayMeasurement m = measure_rays(AnyTracer(*tracers[v]), rays[k], RayQuery::closest, {.repeats = 1});
         steps[v][k] = m.steps.mean;
         tests[v][k] = m.triangle_tests.mean;
       }
     std::vector<Hit> hits;
     for (int pass = 0; pass < opt.ray_passes; ++pass)
-      for (int k = 0; k < 2; ++k)
+      for (int k = 0; k < kSets; ++k)
         for (size_t v = 0; v < kVariants; ++v) {
           // On one thread the tracing thread's own CPU time: the process's would also count
           // the build's idle workers spinning down.
@@ -496,7 +540,7 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
   }
   for (size_t v = 0; v < kVariants; ++v) {
     nlohmann::json& row = out[v];
-    const double mrays[2] = {median(rates[v][0]) * 1e-6, median(rates[v][1]) * 1e-6};
+    const double mrays[kSets] = {median(rates[v][0]) * 1e-6, median(rates[v][1]) * 1e-6, median(rates[v][2]) * 1e-6};
     // The spread of the passes: a ratio between two trees is settled only when it exceeds it.
     const auto spread = [](std::vector<double> r) {
       std::sort(r.begin(), r.end());
@@ -510,18 +554,23 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     row["random_steps_mean"] = steps[v][1];
     row["primary_triangle_tests_mean"] = tests[v][0];
     row["random_triangle_tests_mean"] = tests[v][1];
+    row["lines_mrays"] = mrays[2];
+    row["lines_iqr_fraction"] = spread(rates[v][2]);
+    row["lines_steps_mean"] = steps[v][2];
+    row["lines_triangle_tests_mean"] = tests[v][2];
     row["wide_bytes"] = tracers[v]->layout().stats().bytes;
     row["wide_blocks"] = tracers[v]->layout().stats().blocks;
     row["ray_passes"] = opt.ray_passes;
     row["ray_threads"] = opt.ray_threads;
     row["wide_sah_cost"] = tracers[v]->layout().stats().sah_cost;
-    std::printf("%-22s %-12s %7.3f %9.1f %9.2f %9.2f %8.2f %6.1f %9.2f %9.2f %5.0f%% %5.0f%% %6.2f %6.2f %6.2f %6.2f %7.3f %7.1f\n",
+    std::printf("%-22s %-12s %7.3f %9.1f %9.2f %9.2f %8.2f %6.1f %9.2f %9.2f %5.0f%% %5.0f%% %6.2f %6.2f %6.2f %6.2f %7.3f %7.1f %9.2f %5.0f%% %6.2f %6.2f\n",
                 name.c_str(), variants[v].name, row["refs_per_triangle"].get<double>(),
                 row["build_seconds"].get<double>() * 1e3, row["cost"].get<double>(),
                 row["optimized_cost"].get<double>(), ocosts[v], row["optimize_seconds"].get<double>(), mrays[0],
                 mrays[1], 100.0 * spread(rates[v][0]), 100.0 * spread(rates[v][1]), steps[v][0], tests[v][0],
                 steps[v][1], tests[v][1], tracers[v]->layout().stats().sah_cost,
-                double(tracers[v]->layout().stats().bytes) / (1 << 20));
+                double(tracers[v]->layout().stats().bytes) / (1 << 20), mrays[2], 100.0 * spread(rates[v][2]),
+                steps[v][2], tests[v][2]);
   }
   // What bake --quality best keeps, with and without spatial splits: the start of the lowest
   // ocost among the sbvh ones and among the sweep ones (no EVH), and their rays side by side.
@@ -536,9 +585,10 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
     out[v]["best_split"] = v == best[1];
   }
   const auto mr = [&](size_t v, int k) { return median(rates[v][k]); };
-  std::printf("%-22s best split %s (ocost %.2f) / best unsplit %s (ocost %.2f): primary %.3f, random %.3f\n",
+  std::printf("%-22s best split %s (ocost %.2f) / best unsplit %s (ocost %.2f): primary %.3f, random %.3f, lines %.3f\n",
               name.c_str(), variants[best[1]].name, ocosts[best[1]], variants[best[0]].name, ocosts[best[0]],
-              ratio(mr(best[1], 0), mr(best[0], 0)), ratio(mr(best[1], 1), mr(best[0], 1)));
+              ratio(mr(best[1], 0), mr(best[0], 0)), ratio(mr(best[1], 1), mr(best[0], 1)),
+              ratio(mr(best[1], 2), mr(best[0], 2)));
   std::fflush(stdout);
   return out;
 }
@@ -551,9 +601,9 @@ int run(int argc, char** argv) {
                 "on %d thread(s) = rays over CPU time (the thread's on one) / threads, median of %d interleaved passes "
                 "(iqr: interquartile range over the median); steps and triangle tests per ray\n",
                 opt.threads, opt.budget, opt.opt_seconds > 0 ? opt.opt_seconds : 20.0, opt.ray_threads, opt.ray_passes);
-    std::printf("%-22s %-12s %7s %9s %9s %9s %8s %6s %9s %9s %6s %6s %6s %6s %6s %6s %7s %7s\n", "scene", "variant",
+    std::printf("%-22s %-12s %7s %9s %9s %9s %8s %6s %9s %9s %6s %6s %6s %6s %6s %6s %7s %7s %9s %6s %6s %6s\n", "scene", "variant",
                 "ref/tri", "build ms", "cost", "opt cost", "ocost", "opt s", "prim Mr/s", "rand Mr/s", "p iqr", "r iqr",
-                "p stp", "p tst", "r stp", "r tst", "wideSAH", "MiB");
+                "p stp", "p tst", "r stp", "r tst", "wideSAH", "MiB", "line Mr/s", "l iqr", "l stp", "l tst");
     for (const std::string& spec : scene_specs(opt.scenes))
       for (float angle : opt.rotations)
         for (auto& row : compare_scene(opt, spec, angle)) all.push_back(row);
