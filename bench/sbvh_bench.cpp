@@ -44,6 +44,7 @@
 #include <iostream>
 #include <limits>
 #include <memory>
+#include <numbers>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -406,8 +407,8 @@ std::vector<Ray> sah_lines(const Box& box, size_t count, uint64_t seed) {
   const Vec3 e = box.extent();
   const double face[3] = {double(e.y) * e.z, double(e.x) * e.z, double(e.x) * e.y};  // area of a face normal to x, y, z
   const double total = face[0] + face[1] + face[2];
-  std::vector<Ray> rays(count);
   if (!(total > 0.0)) return {};
+  std::vector<Ray> rays(count);
   RandomStream rng{seed * kGoldenGamma};
   for (Ray& r : rays) {
     double pick = rng.open_uniform() * total;
@@ -419,7 +420,7 @@ std::vector<Ray> sah_lines(const Box& box, size_t count, uint64_t seed) {
     const float bmin[3] = {box.min.x, box.min.y, box.min.z}, bmax[3] = {box.max.x, box.max.y, box.max.z};
     p[axis] = high ? bmax[axis] : bmin[axis];
     // Cosine-distributed about the inward normal: its component along the axis is sqrt(1 - u).
-    const float u = rng.uniform_float(), phi = 2.0f * 3.14159265f * rng.uniform_float();
+    const float u = rng.uniform_float(), phi = 2.0f * std::numbers::pi_v<float> * rng.uniform_float();
     const float along = std::sqrt(1.0f - u), across = std::sqrt(u);
     float d[3];
     d[axis] = high ? -along : along;
@@ -450,8 +451,9 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
                               {"sbvh-l8-m256", BuilderKind::spatial_split, false, 8, 256},
                               {"sbvh+evh", BuilderKind::spatial_split, true}};
   constexpr size_t kVariants = std::size(variants);
-  // Primary, random, and the SAH's isotropic lines.
+  // Primary, random, and the SAH's isotropic lines; the JSON fields' prefixes.
   constexpr int kSets = 3;
+  const char* const set_names[kSets] = {"primary", "random", "lines"};
   std::vector<Ray> rays[kSets];
   std::vector<std::unique_ptr<WideTracer>> tracers;
   std::vector<double> ocosts;
@@ -540,24 +542,20 @@ nlohmann::json compare_scene(const Options& opt, const std::string& spec, float 
   }
   for (size_t v = 0; v < kVariants; ++v) {
     nlohmann::json& row = out[v];
-    const double mrays[kSets] = {median(rates[v][0]) * 1e-6, median(rates[v][1]) * 1e-6, median(rates[v][2]) * 1e-6};
+    double mrays[kSets];
+    for (int k = 0; k < kSets; ++k) mrays[k] = median(rates[v][k]) * 1e-6;
     // The spread of the passes: a ratio between two trees is settled only when it exceeds it.
     const auto spread = [](std::vector<double> r) {
       std::sort(r.begin(), r.end());
       return r.back() > 0 ? (r[(3 * r.size()) / 4] - r[r.size() / 4]) / r[r.size() / 2] : 0.0;
     };
-    row["primary_mrays"] = mrays[0];
-    row["random_mrays"] = mrays[1];
-    row["primary_iqr_fraction"] = spread(rates[v][0]);
-    row["random_iqr_fraction"] = spread(rates[v][1]);
-    row["primary_steps_mean"] = steps[v][0];
-    row["random_steps_mean"] = steps[v][1];
-    row["primary_triangle_tests_mean"] = tests[v][0];
-    row["random_triangle_tests_mean"] = tests[v][1];
-    row["lines_mrays"] = mrays[2];
-    row["lines_iqr_fraction"] = spread(rates[v][2]);
-    row["lines_steps_mean"] = steps[v][2];
-    row["lines_triangle_tests_mean"] = tests[v][2];
+    for (int k = 0; k < kSets; ++k) {
+      const std::string set = set_names[k];
+      row[set + "_mrays"] = mrays[k];
+      row[set + "_iqr_fraction"] = spread(rates[v][k]);
+      row[set + "_steps_mean"] = steps[v][k];
+      row[set + "_triangle_tests_mean"] = tests[v][k];
+    }
     row["wide_bytes"] = tracers[v]->layout().stats().bytes;
     row["wide_blocks"] = tracers[v]->layout().stats().blocks;
     row["ray_passes"] = opt.ray_passes;
