@@ -24,7 +24,9 @@
 // collapse, any-hit rays nearest first ("anynear"; shadow rays), the collapse with c_blk =
 // 0.5, 0.7, 1 and 1.5 (c_node = 1; to recalibrate the default 1 : 0.25 on another CPU;
 // --block-costs C,... traces those c_blk instead, and without --wide-variants only those),
-// every ISA the CPU has, and 1 and 2 rays traced side by side. --fit-costs prints, per row, the wide tracer's nodes and blocks per ray beside its
+// every ISA the CPU has, and 1 and 2 rays traced side by side; it and --closest-near add the
+// best and baked bvh8 with closest-hit rays always nearest first ("bvh8-near", against the
+// default ClosestHitOrder::adaptive). --fit-costs prints, per row, the wide tracer's nodes and blocks per ray beside its
 // ns/ray, the data the wide cost model is calibrated from. The run ends with each wide
 // tree's geometric mean ratio to Embree MEDIUM over every scene and ray set, per ray set
 // too, and the number of pairs where it is at least 1.
@@ -111,6 +113,9 @@ struct Options {
   // --block-costs, or --wide-variants' 0.5, 0.7, 1 and 1.5.
   std::vector<double> block_costs;
   bool fit_costs = false;
+  // --closest-near: the best and baked bvh8 also with closest-hit rays always nearest first
+  // (ClosestHitOrder::near_first), traced in the same passes as the default's adaptive order.
+  bool closest_near = false;
   std::string baked_dir;  // empty: no "baked" row
   std::vector<uint32_t> batch_sizes;  // --batch-sizes: best-bvh8 traced in calls of these many rays
 };
@@ -130,6 +135,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--wide-variants") o.wide_variants = true;
     else if (a == "--block-costs") o.block_costs = parse_positive_list(args.value(), a);
     else if (a == "--fit-costs") o.fit_costs = true;
+    else if (a == "--closest-near") o.closest_near = true;
     else if (a == "--wall") o.wall = true;
     else if (a == "--opt-seconds") o.opt_seconds = args.double_value();
     else if (a == "--best-seconds") o.best_seconds = args.double_value();
@@ -159,6 +165,7 @@ Options parse(int argc, char** argv) {
                    "            [--best-seconds S] [--best-leaf N]   (the 'best' row; S = 0 drops it)\n"
                    "            [--json FILE] [--no-wide] [--wide-variants] [--block-costs 0.25,0.35] [--fit-costs]\n"
                    "            [--baked DIR]   (the 'baked' row: DIR/<scene>.bvh from bvhopt bake --quality best)\n"
+                   "            [--closest-near]   (best and baked bvh8 also with closest-hit rays always nearest first)\n"
                    "            [--batch-sizes 1,16,256]   (best-bvh8 on 1 thread in calls of that many rays)\n";
       std::exit(0);
     } else {
@@ -380,7 +387,7 @@ double agreement(const std::vector<Hit>& a, const std::vector<Hit>& b, RayQuery 
 // The wide rows' tracers: bvh8 and bvh4 of the best and the sweep-l1 trees, and with
 // `variants` the other choices for the best bvh8.
 std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mesh, bool variants,
-                                 std::vector<double> block_costs) {
+                                 std::vector<double> block_costs, bool closest_near) {
   std::vector<WideTree> out;
   auto add = [&](const Tree& t, const std::string& suffix, WideTracerOptions o) {
     WideTree w;
@@ -396,6 +403,11 @@ std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mes
         WideTracerOptions o;
         o.layout.collapse.width = width;
         add(t, "bvh" + std::to_string(width), o);
+      }
+      if ((closest_near || variants) && t.name != std::string("sweep-l1")) {
+        WideTracerOptions o;
+        o.closest_hit_order = ClosestHitOrder::near_first;
+        add(t, "bvh8-near", o);
       }
       if (t.name != "best") continue;
       if (variants && block_costs.empty()) block_costs = {0.5, 0.7, 1.0, 1.5};
@@ -613,7 +625,7 @@ int run(const Options& opt) {
 #endif
     std::printf("\n## %s: %zu triangles\n", scene.c_str(), mesh.triangle_count());
     std::vector<WideTree> wide;
-    if (opt.wide) wide = wide_trees(trees, mesh, opt.wide_variants, opt.block_costs);
+    if (opt.wide) wide = wide_trees(trees, mesh, opt.wide_variants, opt.block_costs, opt.closest_near);
     for (const WideTree& w : wide) {
       const WideLayoutStats& st = w.tracer->layout().stats();
       // One cold run, the tracer's construction included; layout_bench times the target

@@ -50,6 +50,7 @@ struct TraceOptions {
   int repeats = 3;
   uint32_t rays_per_call = 0;  // 0: a block of 256 rays a call
   std::string any_hit_order = "far";
+  std::string closest_hit_order = "auto";
   std::string light;  // shadow rays' point light, X,Y,Z (empty: default_light)
   std::string query;  // "closest" | "any"; empty: the ray set's own
   uint32_t width = 1024, height = 768;
@@ -124,6 +125,7 @@ void print_trace_json(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
                       {"hit_rate", m1.hit_rate},
                       {"rays_per_call", opt.rays_per_call},
                       {"any_hit_order", opt.any_hit_order},
+                      {"closest_hit_order", opt.closest_hit_order},
                       {"threads_1", {{"seconds", m1.seconds}, {"rays_per_second", m1.rays_per_second}}},
                       {"threads_n", {{"threads", mn.threads}, {"seconds", mn.seconds},
                                      {"rays_per_second", mn.rays_per_second}}},
@@ -209,7 +211,8 @@ void run_trace(const TraceOptions& opt) {
   auto threads = opt.threads.apply();
   ProgressLine progress;
   const SceneAndTree loaded = load_scene_and_tree(opt.scene, opt.bvh_file, progress, opt.layout.layout(),
-                                                 opt.wide_cost.model(), *parse_any_hit_order(opt.any_hit_order));
+                                                 opt.wide_cost.model(), *parse_any_hit_order(opt.any_hit_order),
+                                                 *parse_closest_hit_order(opt.closest_hit_order));
   const Mesh& mesh = loaded.mesh;
   const LoadedTree& tree = loaded.tree;
   const ChildOrder order = parse_child_order(opt.order);
@@ -286,6 +289,13 @@ void register_trace_command(CLI::App& app) {
                   "bvh4 / bvh8: any-hit (shadow) rays search from the ray's far end or its near end, nearest first as "
                   "closest-hit rays (docs/wide-bvh.md, \"Any-hit rays from the far end\")")
       ->check(CLI::IsMember({"far", "near"}))
+      ->capture_default_str();
+  cmd->add_option("--closest-hit-order", opt->closest_hit_order,
+                  "bvh4 / bvh8: closest-hit rays in batches enter children nearest first ('near'), or ('auto') in slot "
+                  "order while the batch's rays mostly hit nothing (rays that hit nothing visit the same boxes in any "
+                  "order) "
+                  "(docs/wide-bvh.md, \"Closest-hit rays that mostly hit nothing\")")
+      ->check(CLI::IsMember({"auto", "near"}))
       ->capture_default_str();
   cmd->add_option("--light", opt->light,
                   "Shadow rays: the point light they go to (default: above the centre of the scene's box by 0.4 of its "

@@ -74,7 +74,8 @@ inline BvhFile read_tree_for_scene(const std::string& file, const Mesh& mesh) {
 
 inline LoadedTree load_tree_for_scene(const std::string& file, const Mesh& mesh,
                                       TraceLayout layout = TraceLayout::bvh2, const WideCostModel& cost = {},
-                                      AnyHitOrder any_hit_order = AnyHitOrder::far_first) {
+                                      AnyHitOrder any_hit_order = AnyHitOrder::far_first,
+                                      ClosestHitOrder closest_hit_order = ClosestHitOrder::adaptive) {
   BvhFile f = read_tree_for_scene(file, mesh);
   LoadedTree t;
   t.info = f.info;
@@ -82,7 +83,7 @@ inline LoadedTree load_tree_for_scene(const std::string& file, const Mesh& mesh,
   t.tracer = std::make_unique<Tracer>(flat, mesh);
   if (layout != TraceLayout::bvh2) {
     const auto start = std::chrono::steady_clock::now();
-    t.wide = make_wide_tracer(flat, mesh, layout, cost, any_hit_order);
+    t.wide = make_wide_tracer(flat, mesh, layout, cost, any_hit_order, closest_hit_order);
     t.layout_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   return t;
@@ -96,11 +97,12 @@ struct SceneAndTree {
 inline SceneAndTree load_scene_and_tree(const SceneOption& scene, const std::string& bvh_file,
                                         ProgressLine& progress, TraceLayout layout = TraceLayout::bvh2,
                                         const WideCostModel& cost = {},
-                                        AnyHitOrder any_hit_order = AnyHitOrder::far_first) {
+                                        AnyHitOrder any_hit_order = AnyHitOrder::far_first,
+                                        ClosestHitOrder closest_hit_order = ClosestHitOrder::adaptive) {
   progress.update("loading " + scene.spec + " and " + bvh_file, true);
   SceneAndTree out;
   out.mesh = scene.load();
-  out.tree = load_tree_for_scene(bvh_file, out.mesh, layout, cost, any_hit_order);
+  out.tree = load_tree_for_scene(bvh_file, out.mesh, layout, cost, any_hit_order, closest_hit_order);
   return out;
 }
 

@@ -69,6 +69,29 @@ TEST_F(WideCli, TraceTimesRaysInCallsOfTheAskedSize) {
   EXPECT_NE(bad.err.find("--rays-per-call"), std::string::npos) << bad.err;
 }
 
+// --closest-hit-order: ambient occlusion rays nearest first or in slot order where they
+// mostly miss give the same answers (the hit rate, and no disagreement with brute force), the
+// JSON says which ran, the default is auto; an unknown value is refused by name.
+TEST_F(WideCli, TraceOrdersClosestHitRaysAsAsked) {
+  const fs::path bvh = dir_ / "s.bvh";
+  const std::string scene = " --scene 'builtin?triangles=4000'";
+  ASSERT_EQ(run("build 'builtin?triangles=4000' -o " + bvh.string()).exit_code, 0);
+  nlohmann::json j[3];
+  const char* asked[3] = {"", " --closest-hit-order auto", " --closest-hit-order near"};
+  for (int i = 0; i < 3; ++i) {
+    CliRun r = run("trace " + bvh.string() + scene + " --rays ao --count 3000 --check 3000 --repeats 1 --json" + asked[i]);
+    ASSERT_EQ(r.exit_code, 0) << asked[i] << ": " << r.err;
+    j[i] = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j[i]["brute_force"]["mismatches"], 0) << asked[i];
+    EXPECT_EQ(j[i]["closest_hit_order"], i == 2 ? "near" : "auto");
+    EXPECT_EQ(j[i]["hit_rate"], j[0]["hit_rate"]);
+  }
+  EXPECT_GT(j[0]["hit_rate"].get<double>(), 0.0);
+  CliRun bad = run("trace " + bvh.string() + scene + " --rays ao --closest-hit-order far");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.err.find("--closest-hit-order"), std::string::npos) << bad.err;
+}
+
 // --any-hit-order: shadow rays from either end give the same answers (the hit rate, and no
 // disagreement with brute force), the JSON and the text say which ran, the default is the
 // far end, and the two walk the tree differently; an unknown value is refused by name.

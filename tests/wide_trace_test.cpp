@@ -301,7 +301,11 @@ TEST(WideTrace, CoherentAndIncoherentBatchesGiveTheSameHitsAndWork) {
   ASSERT_FALSE(wide_kernels::rays_coherent(shuffled.data(), shuffled.size()));
   for (Isa isa : machine_isas())
     for (uint32_t w : {4u, 8u}) {
-      const WideTracer tracer = make_tracer(flat, mesh, {w, TriangleTest::moller_trumbore, NearFirst::octant_order, isa});
+      // Nearest first throughout: in slot order (ClosestHitOrder::adaptive) the shuffled
+      // batch's runs of mostly missing rays would count other work.
+      WideTracerOptions o = variant_options({w, TriangleTest::moller_trumbore, NearFirst::octant_order, isa});
+      o.closest_hit_order = ClosestHitOrder::near_first;
+      const WideTracer tracer(flat, mesh, o);
       std::vector<Hit> in_order(camera.rays.size()), mixed(camera.rays.size());
       TraceCounters a, b;
       tracer.closest(camera.rays.data(), camera.rays.size(), in_order.data(), a);
@@ -432,7 +436,11 @@ bool far_any_batch_compacts(const Variant& v, const std::vector<Ray>& rays, AnyH
 void expect_per_ray_calls_match_batches(const FlatBvh& flat, const Mesh& mesh, const std::vector<RaySet>& sets,
                                         const std::string& what) {
   for (const Variant& v : all_variants()) {
-    const WideTracer tracer = make_tracer(flat, mesh, v);
+    // Closest-hit batches nearest first, as one ray a call is traced (ClosestHitOrder; the
+    // adaptive order has tests of its own below).
+    WideTracerOptions nearest = variant_options(v);
+    nearest.closest_hit_order = ClosestHitOrder::near_first;
+    const WideTracer tracer(flat, mesh, nearest);
     for (const RaySet& set : sets) {
       const std::vector<Ray>& rays = set.rays;
       std::vector<Hit> batch_hits(rays.size());
@@ -482,6 +490,123 @@ TEST(WideTrace, PerRayCallsGiveTheSameHitsAndWorkAsBatches) {
   const PrimitiveRefs refs = make_references(mesh);
   const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 4);
   expect_per_ray_calls_match_batches(flat, mesh, ray_sets_for(mesh, flat, 1500), "sweep tree");
+}
+
+// Closest-hit rays of an incoherent batch enter children in slot order in the runs after a
+// run where at most one ray in eight hit anything (ClosestHitOrder::adaptive). A batch of
+// short rays inside the mesh's box that mostly hit nothing, every sixteenth ray aimed from
+// outside at a triangle: the same hits as brute force and as nearest first on every variant,
+// other counted work than nearest first (the slot order was taken: the aimed rays find their
+// hit in another order), and the same counted work on every ISA (the choice rests on exact
+// hits, the slot order is the same on each). A batch of aimed rays alone, which all hit,
+// counts the nearest-first work exactly: it never leaves that order.
+TEST(WideTrace, ClosestHitRaysThatMostlyMissEnterChildrenInSlotOrder) {
+  const Mesh mesh = testing::random_mesh(3000, 71, true);
+  const PrimitiveRefs refs = make_references(mesh);
+  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 4);
+  const Box box = mesh_bounds(mesh);
+  const Vec3 extent = box.max - box.min;
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  const auto point_in_box = [&] {
+    return Vec3{box.min.x + unit(rng) * extent.x, box.min.y + unit(rng) * extent.y, box.min.z + unit(rng) * extent.z};
+  };
+  const auto direction = [&] {
+    for (;;) {
+      const Vec3 d{2.0f * unit(rng) - 1.0f, 2.0f * unit(rng) - 1.0f, 2.0f * unit(rng) - 1.0f};
+      const float len2 = d.x * d.x + d.y * d.y + d.z * d.z;
+      if (len2 > 0.01f && len2 <= 1.0f) return d / std::sqrt(len2);
+    }
+  };
+  const float diagonal = std::sqrt(extent.x * extent.x + extent.y * extent.y + extent.z * extent.z);
+  // From outside the box through the centroid of a triangle of some area: it hits something.
+  const auto aimed = [&] {
+    for (;;) {
+      const Triangle tri = mesh.triangle(size_t(unit(rng) * float(mesh.triangle_count() - 1)));
+      const Vec3 e1 = tri.v1 - tri.v0, e2 = tri.v2 - tri.v0;
+      const Vec3 n{e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x};
+      if (n.x * n.x + n.y * n.y + n.z * n.z < 1e-8f * diagonal * diagonal * diagonal * diagonal) continue;
+      const Vec3 centroid = (tri.v0 + tri.v1 + tri.v2) / 3.0f;
+      const Vec3 d = direction();
+      Ray r;
+      r.org = centroid - d * (2.0f * diagonal);
+      r.dir = d;
+      return r;
+    }
+  };
+  std::vector<Ray> mostly_missing, hitting;
+  for (size_t i = 0; i < 4096; ++i) {
+    if (i % 16 == 0) {
+      mostly_missing.push_back(aimed());
+      continue;
+    }
+    Ray r;
+    r.org = point_in_box();
+    r.dir = direction();
+    r.tmax = 0.002f * diagonal;
+    mostly_missing.push_back(r);
+  }
+  for (size_t i = 0; i < 2048; ++i) hitting.push_back(aimed());
+  ASSERT_FALSE(wide_kernels::rays_coherent(mostly_missing.data(), mostly_missing.size()));
+  ASSERT_FALSE(wide_kernels::rays_coherent(hitting.data(), hitting.size()));
+
+  const auto hit_share = [&](const std::vector<Ray>& rays) {
+    size_t hit = 0;
+    for (const Ray& r : rays) hit += oracle(mesh, r, TriangleTest::moller_trumbore).hit();
+    return double(hit) / double(rays.size());
+  };
+  const double missing_share = hit_share(mostly_missing);
+  ASSERT_GT(missing_share, 0.04) << "the aimed rays must hit for this test to mean anything";
+  ASSERT_LT(missing_share, 0.1) << "the batch must mostly miss for this test to mean anything";
+  ASSERT_EQ(hit_share(hitting), 1.0);
+
+  for (uint32_t w : {4u, 8u}) {
+    for (TriangleTest test : {TriangleTest::moller_trumbore, TriangleTest::watertight}) {
+      std::vector<Hit> want;
+      for (const Ray& r : mostly_missing) want.push_back(oracle(mesh, r, test));
+      TraceCounters first_isa;
+      for (Isa isa : machine_isas()) {
+        const std::string what = "bvh" + std::to_string(w) + " " + std::string(triangle_test_name(test)) + " " +
+                                 std::string(isa_name(isa));
+        WideTracerOptions o = variant_options({w, test, NearFirst::octant_order, isa});
+        // Lanes would trace these scattered rays side by side, nearest first.
+        o.lanes = 1;
+        const WideTracer adaptive(flat, mesh, o);
+        o.closest_hit_order = ClosestHitOrder::near_first;
+        const WideTracer nearest(flat, mesh, o);
+        std::vector<Hit> a(mostly_missing.size()), n(mostly_missing.size());
+        TraceCounters ca, cn;
+        adaptive.closest(mostly_missing.data(), mostly_missing.size(), a.data(), ca);
+        nearest.closest(mostly_missing.data(), mostly_missing.size(), n.data(), cn);
+        for (size_t i = 0; i < a.size(); ++i) {
+          ASSERT_EQ(a[i].triangle_id, want[i].triangle_id) << what << " ray " << i;
+          ASSERT_EQ(n[i].triangle_id, want[i].triangle_id) << what << " ray " << i;
+          if (want[i].hit()) {
+            ASSERT_EQ(a[i].t, want[i].t) << what << " ray " << i;
+            ASSERT_EQ(a[i].u, want[i].u);
+            ASSERT_EQ(a[i].v, want[i].v);
+          }
+        }
+        EXPECT_NE(ca.steps + ca.triangle_tests, cn.steps + cn.triangle_tests) << what << ": no slot order taken";
+        if (isa == machine_isas().front()) {
+          first_isa = ca;
+        } else {
+          EXPECT_EQ(ca.steps, first_isa.steps) << what;
+          EXPECT_EQ(ca.triangle_tests, first_isa.triangle_tests) << what;
+        }
+        std::vector<Hit> ha(hitting.size()), hn(hitting.size());
+        TraceCounters cha, chn;
+        adaptive.closest(hitting.data(), hitting.size(), ha.data(), cha);
+        nearest.closest(hitting.data(), hitting.size(), hn.data(), chn);
+        EXPECT_EQ(cha.steps, chn.steps) << what;
+        EXPECT_EQ(cha.triangle_tests, chn.triangle_tests) << what;
+        for (size_t i = 0; i < ha.size(); ++i) ASSERT_EQ(ha[i].triangle_id, hn[i].triangle_id) << what << " ray " << i;
+      }
+    }
+  }
+  EXPECT_EQ(parse_closest_hit_order("auto"), ClosestHitOrder::adaptive);
+  EXPECT_EQ(parse_closest_hit_order("near"), ClosestHitOrder::near_first);
+  EXPECT_FALSE(parse_closest_hit_order("far"));
 }
 
 // Any-hit rays walk the octant order from the ray's far end by default (AnyHitOrder): from

@@ -24,11 +24,12 @@ std::string_view trace_layout_name(TraceLayout layout);  // "bvh2", "bvh4", "bvh
 std::optional<TraceLayout> parse_trace_layout(std::string_view name);
 
 // The wide tracer of a bvh4 / bvh8 layout collapsed under `cost`, null for bvh2: what the
-// command line's --layout, --wide-block and --any-hit-order, the experiment and Python's
-// trace() ask for.
+// command line's --layout, --wide-block, --any-hit-order and --closest-hit-order, the
+// experiment and Python's trace() ask for.
 std::unique_ptr<WideTracer> make_wide_tracer(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout,
                                              const WideCostModel& cost = {},
-                                             AnyHitOrder any_hit_order = AnyHitOrder::far_first);
+                                             AnyHitOrder any_hit_order = AnyHitOrder::far_first,
+                                             ClosestHitOrder closest_hit_order = ClosestHitOrder::adaptive);
 
 // Non-owning: the tracer must outlive the handle.
 class AnyTracer {

@@ -180,6 +180,15 @@ def test_rays_and_trace(cli, tmp_path, scene):
     assert not np.array_equal(far.steps, near.steps)
     with pytest.raises(bvhopt.Error, match="any_hit_order"):
         bvh.trace(scene, shadow, layout="bvh8", query="any", repeats=1, any_hit_order="middle")
+    # closest-hit rays that mostly hit nothing may take children in slot order: the same hits
+    ao = bvhopt.rays(scene, "ao", count=3000, seed=2, bvh=bvh)
+    auto = bvh.trace(scene, ao, layout="bvh8", repeats=1)
+    nearest = bvh.trace(scene, ao, layout="bvh8", repeats=1, closest_hit_order="near")
+    np.testing.assert_array_equal(auto.triangle_id, nearest.triangle_id)
+    np.testing.assert_array_equal(auto.t, nearest.t)
+    assert 0 < auto.hit_rate < 1
+    with pytest.raises(bvhopt.Error, match="closest_hit_order"):
+        bvh.trace(scene, ao, layout="bvh8", repeats=1, closest_hit_order="far")
     # a light of one's own: every shadow ray ends there, and another light lights other hits
     light = (0.5, 40.0, -0.25)
     lit = bvhopt.rays(scene, "shadow", count=3000, seed=2, bvh=bvh, light=light)

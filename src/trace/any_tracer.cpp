@@ -22,12 +22,14 @@ std::optional<TraceLayout> parse_trace_layout(std::string_view name) {
 }
 
 std::unique_ptr<WideTracer> make_wide_tracer(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout,
-                                             const WideCostModel& cost, AnyHitOrder any_hit_order) {
+                                             const WideCostModel& cost, AnyHitOrder any_hit_order,
+                                             ClosestHitOrder closest_hit_order) {
   if (layout == TraceLayout::bvh2) return nullptr;
   WideTracerOptions o;
   o.layout.collapse.width = uint32_t(layout);
   o.layout.collapse.cost = cost;
   o.any_hit_order = any_hit_order;
+  o.closest_hit_order = closest_hit_order;
   return std::make_unique<WideTracer>(flat, mesh, o);
 }
 

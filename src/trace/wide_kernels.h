@@ -25,6 +25,9 @@ struct Batch {
   // Whether the rays go mostly the same way, ray after ray (camera rays): the kernel then
   // orders children with branches the CPU predicts, else (AVX-512) without branches.
   bool coherent;
+  // Closest-hit rays of an incoherent batch may enter children in slot order where few of
+  // them hit anything (ClosestHitOrder::adaptive; see trace_range).
+  bool slot_order_when_missing;
   // The traversal stacks, one per lane, each as two arrays of at least
   // WideBvh::stack_entries() entries: child words and the entry distances of their boxes.
   uint32_t* stack_words;

@@ -52,9 +52,20 @@ std::optional<AnyHitOrder> parse_any_hit_order(std::string_view name) {
   return std::nullopt;
 }
 
+std::string_view closest_hit_order_name(ClosestHitOrder order) {
+  return order == ClosestHitOrder::near_first ? "near" : "auto";
+}
+
+std::optional<ClosestHitOrder> parse_closest_hit_order(std::string_view name) {
+  for (ClosestHitOrder o : {ClosestHitOrder::adaptive, ClosestHitOrder::near_first})
+    if (name == closest_hit_order_name(o)) return o;
+  return std::nullopt;
+}
+
 WideTracer::WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOptions& options)
     : bvh_(bvh, mesh, options.layout), isa_(options.isa ? *options.isa : default_isa()), near_first_(options.near_first),
       any_octant_flip_(options.any_hit_order == AnyHitOrder::far_first ? 7u : 0u),
+      closest_hit_order_(options.closest_hit_order),
       lanes_(options.lanes == 0 ? kMaxTraceLanes : options.lanes),
       scatter_distance_(bvh.nodes.empty() ? 0.0f : wide_kernels::scatter_distance(bvh.nodes[0].box)) {
   if (!isa_supported(isa_)) throw Error("wide tracer: this CPU does not support " + std::string(isa_name(isa_)));
@@ -181,6 +192,7 @@ void WideTracer::closest(const Ray* rays, size_t count, Hit* hits, TraceCounters
     b.rays = rays;
     b.count = count;
     b.hits = hits;
+    b.slot_order_when_missing = closest_hit_order_ == ClosestHitOrder::adaptive;
   });
 }
 
