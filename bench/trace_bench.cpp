@@ -26,7 +26,8 @@
 // --block-costs C,... traces those c_blk instead, and without --wide-variants only those),
 // every ISA the CPU has, and 1 and 2 rays traced side by side; it and --closest-near add the
 // best and baked bvh8 with closest-hit rays always nearest first ("bvh8-near", against the
-// default ClosestHitOrder::adaptive). --fit-costs prints, per row, the wide tracer's nodes and blocks per ray beside its
+// default ClosestHitOrder::adaptive); --any-far adds them with any-hit rays always from the
+// far end ("bvh8-far", against the default AnyHitOrder::adaptive). --fit-costs prints, per row, the wide tracer's nodes and blocks per ray beside its
 // ns/ray, the data the wide cost model is calibrated from. The run ends with each wide
 // tree's geometric mean ratio to Embree MEDIUM over every scene and ray set, per ray set
 // too, and the number of pairs where it is at least 1.
@@ -116,6 +117,8 @@ struct Options {
   // --closest-near: the best and baked bvh8 also with closest-hit rays always nearest first
   // (ClosestHitOrder::near_first), traced in the same passes as the default's adaptive order.
   bool closest_near = false;
+  // --any-far: the same with any-hit rays always from their far end (AnyHitOrder::far_first).
+  bool any_far = false;
   std::string baked_dir;  // empty: no "baked" row
   std::vector<uint32_t> batch_sizes;  // --batch-sizes: best-bvh8 traced in calls of these many rays
 };
@@ -136,6 +139,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--block-costs") o.block_costs = parse_positive_list(args.value(), a);
     else if (a == "--fit-costs") o.fit_costs = true;
     else if (a == "--closest-near") o.closest_near = true;
+    else if (a == "--any-far") o.any_far = true;
     else if (a == "--wall") o.wall = true;
     else if (a == "--opt-seconds") o.opt_seconds = args.double_value();
     else if (a == "--best-seconds") o.best_seconds = args.double_value();
@@ -166,6 +170,7 @@ Options parse(int argc, char** argv) {
                    "            [--json FILE] [--no-wide] [--wide-variants] [--block-costs 0.25,0.35] [--fit-costs]\n"
                    "            [--baked DIR]   (the 'baked' row: DIR/<scene>.bvh from bvhopt bake --quality best)\n"
                    "            [--closest-near]   (best and baked bvh8 also with closest-hit rays always nearest first)\n"
+                   "            [--any-far]   (best and baked bvh8 also with any-hit rays always from the far end)\n"
                    "            [--batch-sizes 1,16,256]   (best-bvh8 on 1 thread in calls of that many rays)\n";
       std::exit(0);
     } else {
@@ -387,7 +392,7 @@ double agreement(const std::vector<Hit>& a, const std::vector<Hit>& b, RayQuery 
 // The wide rows' tracers: bvh8 and bvh4 of the best and the sweep-l1 trees, and with
 // `variants` the other choices for the best bvh8.
 std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mesh, bool variants,
-                                 std::vector<double> block_costs, bool closest_near) {
+                                 std::vector<double> block_costs, bool closest_near, bool any_far) {
   std::vector<WideTree> out;
   auto add = [&](const Tree& t, const std::string& suffix, WideTracerOptions o) {
     WideTree w;
@@ -408,6 +413,11 @@ std::vector<WideTree> wide_trees(const std::vector<Tree>& trees, const Mesh& mes
         WideTracerOptions o;
         o.closest_hit_order = ClosestHitOrder::near_first;
         add(t, "bvh8-near", o);
+      }
+      if (any_far && t.name != std::string("sweep-l1")) {
+        WideTracerOptions o;
+        o.any_hit_order = AnyHitOrder::far_first;
+        add(t, "bvh8-far", o);
       }
       if (t.name != "best") continue;
       if (variants && block_costs.empty()) block_costs = {0.5, 0.7, 1.0, 1.5};
@@ -625,7 +635,7 @@ int run(const Options& opt) {
 #endif
     std::printf("\n## %s: %zu triangles\n", scene.c_str(), mesh.triangle_count());
     std::vector<WideTree> wide;
-    if (opt.wide) wide = wide_trees(trees, mesh, opt.wide_variants, opt.block_costs, opt.closest_near);
+    if (opt.wide) wide = wide_trees(trees, mesh, opt.wide_variants, opt.block_costs, opt.closest_near, opt.any_far);
     for (const WideTree& w : wide) {
       const WideLayoutStats& st = w.tracer->layout().stats();
       // One cold run, the tracer's construction included; layout_bench times the target

@@ -17,6 +17,12 @@ namespace bvhopt::cli {
 
 namespace {
 
+// How the text report names an any-hit order (the JSON field keeps the option's word).
+std::string any_hit_order_text(const std::string& order) {
+  if (order == "auto") return "far end first, slot order while the batch mostly misses";
+  return order + " end first";
+}
+
 nlohmann::json distribution_json(const CountDistribution& d) {
   return {{"mean", d.mean}, {"p50", d.p50}, {"p90", d.p90}, {"p99", d.p99}, {"max", d.max},
           {"histogram_bin_width", 10}, {"histogram", d.histogram}};
@@ -49,7 +55,7 @@ struct TraceOptions {
   uint64_t check = 1000;
   int repeats = 3;
   uint32_t rays_per_call = 0;  // 0: a block of 256 rays a call
-  std::string any_hit_order = "far";
+  std::string any_hit_order = "auto";
   std::string closest_hit_order = "auto";
   std::string light;  // shadow rays' point light, X,Y,Z (empty: default_light)
   std::string query;  // "closest" | "any"; empty: the ray set's own
@@ -148,7 +154,7 @@ void print_trace_text(const TraceOptions& opt, const Mesh& mesh, const LoadedTre
             << "\n"
             << "scene      " << mesh.name << " (" << mesh.triangle_count() << " triangles)\n"
             << "rays       " << r.set.rays.size() << " " << ray_kind_name(r.set.kind)
-            << (r.set.query == RayQuery::any ? " (any hit" + std::string(tree.wide ? ", " + opt.any_hit_order + " end first" : "") + ")"
+            << (r.set.query == RayQuery::any ? " (any hit" + std::string(tree.wide ? ", " + any_hit_order_text(opt.any_hit_order) : "") + ")"
                                              : " (closest hit)")
             << ", seed " << r.set.seed
             << (r.light ? ", light at (" + format_double(r.light->x, 4) + ", " + format_double(r.light->y, 4) + ", " +
@@ -286,15 +292,17 @@ void register_trace_command(CLI::App& app) {
       ->type_name("N")
       ->capture_default_str();
   cmd->add_option("--any-hit-order", opt->any_hit_order,
-                  "bvh4 / bvh8: any-hit (shadow) rays search from the ray's far end or its near end, nearest first as "
-                  "closest-hit rays (docs/wide-bvh.md, \"Any-hit rays from the far end\")")
-      ->check(CLI::IsMember({"far", "near"}))
+                  "bvh4 / bvh8: any-hit (shadow) rays search from the ray's far end ('far'), or its near end, nearest "
+                  "first as closest-hit rays ('near'), or ('auto') from the far end but in slot order while the "
+                  "batch's rays mostly hit nothing (docs/wide-bvh.md, \"Any-hit rays from the far end\" and \"Rays "
+                  "that mostly hit nothing\")")
+      ->check(CLI::IsMember({"auto", "far", "near"}))
       ->capture_default_str();
   cmd->add_option("--closest-hit-order", opt->closest_hit_order,
                   "bvh4 / bvh8: closest-hit rays in batches enter children nearest first ('near'), or ('auto') in slot "
                   "order while the batch's rays mostly hit nothing (rays that hit nothing visit the same boxes in any "
                   "order) "
-                  "(docs/wide-bvh.md, \"Closest-hit rays that mostly hit nothing\")")
+                  "(docs/wide-bvh.md, \"Rays that mostly hit nothing\")")
       ->check(CLI::IsMember({"auto", "near"}))
       ->capture_default_str();
   cmd->add_option("--light", opt->light,

@@ -74,7 +74,7 @@ inline BvhFile read_tree_for_scene(const std::string& file, const Mesh& mesh) {
 
 inline LoadedTree load_tree_for_scene(const std::string& file, const Mesh& mesh,
                                       TraceLayout layout = TraceLayout::bvh2, const WideCostModel& cost = {},
-                                      AnyHitOrder any_hit_order = AnyHitOrder::far_first,
+                                      AnyHitOrder any_hit_order = AnyHitOrder::adaptive,
                                       ClosestHitOrder closest_hit_order = ClosestHitOrder::adaptive) {
   BvhFile f = read_tree_for_scene(file, mesh);
   LoadedTree t;
@@ -97,7 +97,7 @@ struct SceneAndTree {
 inline SceneAndTree load_scene_and_tree(const SceneOption& scene, const std::string& bvh_file,
                                         ProgressLine& progress, TraceLayout layout = TraceLayout::bvh2,
                                         const WideCostModel& cost = {},
-                                        AnyHitOrder any_hit_order = AnyHitOrder::far_first,
+                                        AnyHitOrder any_hit_order = AnyHitOrder::adaptive,
                                         ClosestHitOrder closest_hit_order = ClosestHitOrder::adaptive) {
   progress.update("loading " + scene.spec + " and " + bvh_file, true);
   SceneAndTree out;

@@ -436,10 +436,11 @@ bool far_any_batch_compacts(const Variant& v, const std::vector<Ray>& rays, AnyH
 void expect_per_ray_calls_match_batches(const FlatBvh& flat, const Mesh& mesh, const std::vector<RaySet>& sets,
                                         const std::string& what) {
   for (const Variant& v : all_variants()) {
-    // Closest-hit batches nearest first, as one ray a call is traced (ClosestHitOrder; the
-    // adaptive order has tests of its own below).
+    // Closest-hit batches nearest first, as one ray a call is traced (ClosestHitOrder), and
+    // any-hit batches from the far end (the adaptive orders have tests of their own below).
     WideTracerOptions nearest = variant_options(v);
     nearest.closest_hit_order = ClosestHitOrder::near_first;
+    nearest.any_hit_order = AnyHitOrder::far_first;
     const WideTracer tracer(flat, mesh, nearest);
     for (const RaySet& set : sets) {
       const std::vector<Ray>& rays = set.rays;
@@ -471,7 +472,7 @@ void expect_per_ray_calls_match_batches(const FlatBvh& flat, const Mesh& mesh, c
         EXPECT_EQ(one_any.triangle_tests, batch_anyc.triangle_tests) << what << " " << v.name();
       } else {
         // The compacting kernels agree among themselves: one ray after another as side by side.
-        WideTracerOptions o = variant_options(v);
+        WideTracerOptions o = nearest;
         o.lanes = 1;
         const WideTracer one_lane(flat, mesh, o);
         TraceCounters lane_work;
@@ -492,21 +493,17 @@ TEST(WideTrace, PerRayCallsGiveTheSameHitsAndWorkAsBatches) {
   expect_per_ray_calls_match_batches(flat, mesh, ray_sets_for(mesh, flat, 1500), "sweep tree");
 }
 
-// Closest-hit rays of an incoherent batch enter children in slot order in the runs after a
-// run where at most one ray in eight hit anything (ClosestHitOrder::adaptive). A batch of
-// short rays inside the mesh's box that mostly hit nothing, every sixteenth ray aimed from
-// outside at a triangle: the same hits as brute force and as nearest first on every variant,
-// other counted work than nearest first (the slot order was taken: the aimed rays find their
-// hit in another order), and the same counted work on every ISA (the choice rests on exact
-// hits, the slot order is the same on each). A batch of aimed rays alone, which all hit,
-// counts the nearest-first work exactly: it never leaves that order.
-TEST(WideTrace, ClosestHitRaysThatMostlyMissEnterChildrenInSlotOrder) {
-  const Mesh mesh = testing::random_mesh(3000, 71, true);
-  const PrimitiveRefs refs = make_references(mesh);
-  const FlatBvh flat = built(mesh, refs, BuilderKind::sweep_sah, 4);
+// Rays that mostly hit nothing, for the adaptive orders' tests: short rays inside the mesh's
+// box, every sixteenth ray aimed from outside through a triangle's centroid; and a batch of
+// aimed rays alone, which all hit.
+struct MostlyMissingRays {
+  std::vector<Ray> mostly_missing, hitting;
+};
+
+MostlyMissingRays mostly_missing_rays(const Mesh& mesh, uint32_t seed) {
   const Box box = mesh_bounds(mesh);
   const Vec3 extent = box.max - box.min;
-  std::mt19937 rng(9);
+  std::mt19937 rng(seed);
   std::uniform_real_distribution<float> unit(0.0f, 1.0f);
   const auto point_in_box = [&] {
     return Vec3{box.min.x + unit(rng) * extent.x, box.min.y + unit(rng) * extent.y, box.min.z + unit(rng) * extent.z};
@@ -534,79 +531,152 @@ TEST(WideTrace, ClosestHitRaysThatMostlyMissEnterChildrenInSlotOrder) {
       return r;
     }
   };
-  std::vector<Ray> mostly_missing, hitting;
-  for (size_t i = 0; i < 4096; ++i) {
+  MostlyMissingRays out;
+  for (size_t i = 0; i < 2048; ++i) {
     if (i % 16 == 0) {
-      mostly_missing.push_back(aimed());
+      out.mostly_missing.push_back(aimed());
       continue;
     }
     Ray r;
     r.org = point_in_box();
     r.dir = direction();
     r.tmax = 0.002f * diagonal;
-    mostly_missing.push_back(r);
+    out.mostly_missing.push_back(r);
   }
-  for (size_t i = 0; i < 2048; ++i) hitting.push_back(aimed());
-  ASSERT_FALSE(wide_kernels::rays_coherent(mostly_missing.data(), mostly_missing.size()));
-  ASSERT_FALSE(wide_kernels::rays_coherent(hitting.data(), hitting.size()));
+  for (size_t i = 0; i < 1024; ++i) out.hitting.push_back(aimed());
+  return out;
+}
 
-  const auto hit_share = [&](const std::vector<Ray>& rays) {
-    size_t hit = 0;
-    for (const Ray& r : rays) hit += oracle(mesh, r, TriangleTest::moller_trumbore).hit();
-    return double(hit) / double(rays.size());
-  };
-  const double missing_share = hit_share(mostly_missing);
-  ASSERT_GT(missing_share, 0.04) << "the aimed rays must hit for this test to mean anything";
-  ASSERT_LT(missing_share, 0.1) << "the batch must mostly miss for this test to mean anything";
-  ASSERT_EQ(hit_share(hitting), 1.0);
+double hit_share(const std::vector<Hit>& hits) {
+  size_t hit = 0;
+  for (const Hit& h : hits) hit += h.hit();
+  return double(hit) / double(hits.size());
+}
 
-  for (uint32_t w : {4u, 8u}) {
-    for (TriangleTest test : {TriangleTest::moller_trumbore, TriangleTest::watertight}) {
-      std::vector<Hit> want;
-      for (const Ray& r : mostly_missing) want.push_back(oracle(mesh, r, test));
-      TraceCounters first_isa;
-      for (Isa isa : machine_isas()) {
-        const std::string what = "bvh" + std::to_string(w) + " " + std::string(triangle_test_name(test)) + " " +
-                                 std::string(isa_name(isa));
-        WideTracerOptions o = variant_options({w, test, NearFirst::octant_order, isa});
-        // Lanes would trace these scattered rays side by side, nearest first.
-        o.lanes = 1;
-        const WideTracer adaptive(flat, mesh, o);
-        o.closest_hit_order = ClosestHitOrder::near_first;
-        const WideTracer nearest(flat, mesh, o);
-        std::vector<Hit> a(mostly_missing.size()), n(mostly_missing.size());
-        TraceCounters ca, cn;
-        adaptive.closest(mostly_missing.data(), mostly_missing.size(), a.data(), ca);
-        nearest.closest(mostly_missing.data(), mostly_missing.size(), n.data(), cn);
-        for (size_t i = 0; i < a.size(); ++i) {
-          ASSERT_EQ(a[i].triangle_id, want[i].triangle_id) << what << " ray " << i;
-          ASSERT_EQ(n[i].triangle_id, want[i].triangle_id) << what << " ray " << i;
-          if (want[i].hit()) {
-            ASSERT_EQ(a[i].t, want[i].t) << what << " ray " << i;
-            ASSERT_EQ(a[i].u, want[i].u);
-            ASSERT_EQ(a[i].v, want[i].v);
+// A tracer with the adaptive orders (the default) and one with the usual ones (closest hit:
+// nearest first; any hit: from the far end), one ray after the other: lanes would trace
+// scattered rays side by side, in the usual order.
+struct BothOrders {
+  WideTracer adaptive, usual;
+  BothOrders(const FlatBvh& flat, const Mesh& mesh, const Variant& v)
+      : adaptive(flat, mesh, options(v, false)), usual(flat, mesh, options(v, true)) {}
+  static WideTracerOptions options(const Variant& v, bool usual) {
+    WideTracerOptions o = variant_options(v);
+    o.lanes = 1;
+    if (usual) {
+      o.closest_hit_order = ClosestHitOrder::near_first;
+      o.any_hit_order = AnyHitOrder::far_first;
+    }
+    return o;
+  }
+};
+
+// Traces `rays` as `query` both ways, each with the answers of brute force; the work of each
+// in `adaptive_work` and `usual_work`.
+void trace_both_orders(const BothOrders& tracers, RayQuery query, const std::vector<Ray>& rays,
+                       const std::vector<Hit>& want, TraceCounters& adaptive_work, TraceCounters& usual_work,
+                       const std::string& what) {
+  const WideTracer& adaptive = tracers.adaptive;
+  const WideTracer& usual = tracers.usual;
+  if (query == RayQuery::closest) {
+    std::vector<Hit> a(rays.size()), u(rays.size());
+    adaptive.closest(rays.data(), rays.size(), a.data(), adaptive_work);
+    usual.closest(rays.data(), rays.size(), u.data(), usual_work);
+    for (size_t i = 0; i < rays.size(); ++i) {
+      ASSERT_EQ(a[i].triangle_id, want[i].triangle_id) << what << " ray " << i;
+      ASSERT_EQ(u[i].triangle_id, want[i].triangle_id) << what << " ray " << i;
+      if (want[i].hit()) {
+        ASSERT_EQ(a[i].t, want[i].t) << what << " ray " << i;
+        ASSERT_EQ(a[i].u, want[i].u);
+        ASSERT_EQ(a[i].v, want[i].v);
+      }
+    }
+  } else {
+    std::vector<uint8_t> a(rays.size()), u(rays.size());
+    adaptive.any(rays.data(), rays.size(), a.data(), adaptive_work);
+    usual.any(rays.data(), rays.size(), u.data(), usual_work);
+    for (size_t i = 0; i < rays.size(); ++i) {
+      ASSERT_EQ(a[i] != 0, want[i].hit()) << what << " ray " << i;
+      ASSERT_EQ(u[i] != 0, want[i].hit()) << what << " ray " << i;
+    }
+  }
+}
+
+// The rays of an incoherent batch enter children in slot order in the runs after a run where
+// at most one ray in eight hit anything and the rays took 4 steps or more
+// (ClosestHitOrder::adaptive and AnyHitOrder::adaptive). On a tree deep enough for that, a
+// batch that mostly misses: the same answers as brute force and as the usual order
+// (nearest first, or the far end first) on every variant, other counted work than the usual
+// order (the slot order was taken: the aimed rays find their hit in another order), and the
+// same counted work on every ISA (the choice rests on exact hits and counts, the slot order
+// is the same on each). A batch of aimed rays alone, which all hit, counts the usual order's
+// work exactly: it never leaves that order. Nor does the same mostly missing batch on a
+// shallow tree, where its rays take fewer steps.
+TEST(WideTrace, RaysThatMostlyMissEnterChildrenInSlotOrder) {
+  // Deep enough for the mostly missing rays to take over 4 steps a ray in bvh4 and bvh8; the
+  // small mesh's tree takes them fewer.
+  const Mesh mesh = testing::random_mesh(12000, 71, true);
+  const Mesh small = testing::random_mesh(200, 71, true);
+  const FlatBvh deep = built(mesh, make_references(mesh), BuilderKind::sweep_sah, 4);
+  const FlatBvh shallow = built(small, make_references(small), BuilderKind::sweep_sah, 4);
+  const MostlyMissingRays rays = mostly_missing_rays(mesh, 9);
+  const MostlyMissingRays small_rays = mostly_missing_rays(small, 9);
+  for (const MostlyMissingRays* r : {&rays, &small_rays}) {
+    ASSERT_FALSE(wide_kernels::rays_coherent(r->mostly_missing.data(), r->mostly_missing.size()));
+    ASSERT_FALSE(wide_kernels::rays_coherent(r->hitting.data(), r->hitting.size()));
+  }
+
+  for (TriangleTest test : {TriangleTest::moller_trumbore, TriangleTest::watertight}) {
+    std::vector<Hit> want_missing, want_hitting, want_small;
+    for (const Ray& r : rays.mostly_missing) want_missing.push_back(oracle(mesh, r, test));
+    for (const Ray& r : rays.hitting) want_hitting.push_back(oracle(mesh, r, test));
+    for (const Ray& r : small_rays.mostly_missing) want_small.push_back(oracle(small, r, test));
+    for (const std::vector<Hit>* want : {&want_missing, &want_small}) {
+      ASSERT_GT(hit_share(*want), 0.04) << "the aimed rays must hit for this test to mean anything";
+      ASSERT_LT(hit_share(*want), 0.1) << "the batch must mostly miss for this test to mean anything";
+    }
+    ASSERT_EQ(hit_share(want_hitting), 1.0);
+    for (uint32_t w : {4u, 8u}) {
+      for (RayQuery query : {RayQuery::closest, RayQuery::any}) {
+        // The first ISA's work, and whether its any-hit rays from the far end go first into
+        // the child entered last (far_any_batch_compacts): the ISAs that do agree among
+        // themselves, as do those that walk the octant's order.
+        std::optional<TraceCounters> first_isa[2];
+        for (Isa isa : machine_isas()) {
+          const Variant v{w, test, NearFirst::octant_order, isa};
+          const BothOrders deep_tracers(deep, mesh, v), shallow_tracers(shallow, small, v);
+          const std::string what = v.name() + (query == RayQuery::closest ? " closest" : " any");
+          TraceCounters ca, cu;
+          trace_both_orders(deep_tracers, query, rays.mostly_missing, want_missing, ca, cu, what + " deep");
+          EXPECT_NE(ca.steps + ca.triangle_tests, cu.steps + cu.triangle_tests) << what << ": no slot order taken";
+          const bool compacts = query == RayQuery::any && far_any_batch_compacts(v, rays.mostly_missing, AnyHitOrder::far_first);
+          if (!first_isa[compacts]) {
+            first_isa[compacts] = ca;
+          } else {
+            EXPECT_EQ(ca.steps, first_isa[compacts]->steps) << what;
+            EXPECT_EQ(ca.triangle_tests, first_isa[compacts]->triangle_tests) << what;
           }
+          TraceCounters ha, hu;
+          trace_both_orders(deep_tracers, query, rays.hitting, want_hitting, ha, hu, what + " all hit");
+          EXPECT_EQ(ha.steps, hu.steps) << what;
+          EXPECT_EQ(ha.triangle_tests, hu.triangle_tests) << what;
+          TraceCounters sa, su;
+          trace_both_orders(shallow_tracers, query, small_rays.mostly_missing, want_small, sa, su, what + " shallow");
+          EXPECT_EQ(sa.steps, su.steps) << what << " shallow";
+          EXPECT_EQ(sa.triangle_tests, su.triangle_tests) << what << " shallow";
         }
-        EXPECT_NE(ca.steps + ca.triangle_tests, cn.steps + cn.triangle_tests) << what << ": no slot order taken";
-        if (isa == machine_isas().front()) {
-          first_isa = ca;
-        } else {
-          EXPECT_EQ(ca.steps, first_isa.steps) << what;
-          EXPECT_EQ(ca.triangle_tests, first_isa.triangle_tests) << what;
-        }
-        std::vector<Hit> ha(hitting.size()), hn(hitting.size());
-        TraceCounters cha, chn;
-        adaptive.closest(hitting.data(), hitting.size(), ha.data(), cha);
-        nearest.closest(hitting.data(), hitting.size(), hn.data(), chn);
-        EXPECT_EQ(cha.steps, chn.steps) << what;
-        EXPECT_EQ(cha.triangle_tests, chn.triangle_tests) << what;
-        for (size_t i = 0; i < ha.size(); ++i) ASSERT_EQ(ha[i].triangle_id, hn[i].triangle_id) << what << " ray " << i;
       }
     }
   }
   EXPECT_EQ(parse_closest_hit_order("auto"), ClosestHitOrder::adaptive);
   EXPECT_EQ(parse_closest_hit_order("near"), ClosestHitOrder::near_first);
   EXPECT_FALSE(parse_closest_hit_order("far"));
+  EXPECT_EQ(parse_any_hit_order("auto"), AnyHitOrder::adaptive);
+  EXPECT_EQ(parse_any_hit_order("far"), AnyHitOrder::far_first);
+  EXPECT_EQ(parse_any_hit_order("near"), AnyHitOrder::near_first);
+  EXPECT_FALSE(parse_any_hit_order("middle"));
+  EXPECT_EQ(WideTracerOptions{}.closest_hit_order, ClosestHitOrder::adaptive);
+  EXPECT_EQ(WideTracerOptions{}.any_hit_order, AnyHitOrder::adaptive);
 }
 
 // Any-hit rays walk the octant order from the ray's far end by default (AnyHitOrder): from

@@ -28,7 +28,7 @@ std::optional<TraceLayout> parse_trace_layout(std::string_view name);
 // experiment and Python's trace() ask for.
 std::unique_ptr<WideTracer> make_wide_tracer(const FlatBvh& flat, const Mesh& mesh, TraceLayout layout,
                                              const WideCostModel& cost = {},
-                                             AnyHitOrder any_hit_order = AnyHitOrder::far_first,
+                                             AnyHitOrder any_hit_order = AnyHitOrder::adaptive,
                                              ClosestHitOrder closest_hit_order = ClosestHitOrder::adaptive);
 
 // Non-owning: the tracer must outlive the handle.

@@ -54,8 +54,14 @@ enum class AnyHitOrder : uint8_t {
   // saved; the answers are the same either way, the counted work may differ.
   far_first = 0,
   near_first = 1,  // as closest-hit rays
+  // From the far end, but an incoherent batch's rays, in runs of 32 after the first, enter
+  // children in slot order while at most one in 8 of the rays traced so far in the batch hit
+  // anything and they took 4 steps a ray or more, as ClosestHitOrder::adaptive does:
+  // occlusion rays off the closed meshes, 2-7 % of them blocked, about 5-8 % faster
+  // (docs/wide-bvh.md, "Rays that mostly hit nothing"). The default.
+  adaptive = 2,
 };
-// "far", "near" (the command line's --any-hit-order and Python's any_hit_order).
+// "auto", "far", "near" (the command line's --any-hit-order and Python's any_hit_order).
 std::string_view any_hit_order_name(AnyHitOrder order);
 std::optional<AnyHitOrder> parse_any_hit_order(std::string_view name);
 
@@ -65,10 +71,10 @@ std::optional<AnyHitOrder> parse_any_hit_order(std::string_view name);
 enum class ClosestHitOrder : uint8_t {
   // Nearest first, but an incoherent batch's rays, in runs of 32 after the first, enter
   // children in slot order, without the ordering's work, while at most one in 8 of the rays
-  // traced so far in the batch hit anything: ambient occlusion rays off the closed meshes,
-  // 2-7 % of them blocked, about 6-11 % faster (docs/wide-bvh.md, "Closest-hit rays that
-  // mostly hit nothing"). One ray a call, coherent batches and rays traced side by side stay
-  // nearest first.
+  // traced so far in the batch hit anything and they took 4 steps a ray or more (fewer, and
+  // the ordering costs little): ambient occlusion rays off the closed meshes, 2-7 % of them
+  // blocked, about 6-11 % faster (docs/wide-bvh.md, "Rays that mostly hit nothing"). One ray
+  // a call, coherent batches and rays traced side by side stay nearest first.
   adaptive = 0,
   near_first = 1,  // always, as one ray a call is traced
 };
@@ -80,7 +86,7 @@ struct WideTracerOptions {
   WideLayoutOptions layout;
   std::optional<Isa> isa;  // default: default_isa()
   NearFirst near_first = NearFirst::octant_order;
-  AnyHitOrder any_hit_order = AnyHitOrder::far_first;
+  AnyHitOrder any_hit_order = AnyHitOrder::adaptive;
   ClosestHitOrder closest_hit_order = ClosestHitOrder::adaptive;
   // Rays traced side by side on batches of scattered rays (random rays; see the kernel's
   // trace_interleaved): 0 picks the measured best (16), 1 traces one ray after the other,
@@ -104,7 +110,7 @@ class WideTracer {
   // Many rays in one call; counters accumulate. Batches of more than 16 rays are looked at
   // first (coherent camera rays, scattered random rays) to pick how they are traced; smaller
   // ones go ray by ray as above. The hits are the same either way, and so is the counted
-  // work but where ClosestHitOrder::adaptive or AnyHitOrder::far_first takes another order.
+  // work but where the adaptive orders or AnyHitOrder::far_first take another order.
   void closest(const Ray* rays, size_t count, Hit* hits, TraceCounters& counters) const;
   void any(const Ray* rays, size_t count, uint8_t* hit, TraceCounters& counters) const;
 
@@ -120,6 +126,7 @@ class WideTracer {
   Isa isa_;
   NearFirst near_first_;
   uint32_t any_octant_flip_;  // wide_kernels::Batch::any_octant_flip for the options' AnyHitOrder
+  AnyHitOrder any_hit_order_;
   ClosestHitOrder closest_hit_order_;
   uint32_t lanes_;
   float scatter_distance_;  // wide_kernels::scatter_distance of the scene, computed once

@@ -69,7 +69,7 @@ TraceResult trace(const Tree& tree, const Scene& scene, const py::array_t<float,
   if (query != "closest" && query != "any") throw Error("trace: query must be 'closest' or 'any', got '" + query + "'");
   if (order != "split-axis" && order != "distance") throw Error("trace: order must be 'split-axis' or 'distance', got '" + order + "'");
   const std::optional<AnyHitOrder> any_order = parse_any_hit_order(any_hit_order);
-  if (!any_order) throw Error("trace: any_hit_order must be 'far' or 'near', got '" + any_hit_order + "'");
+  if (!any_order) throw Error("trace: any_hit_order must be 'auto', 'far' or 'near', got '" + any_hit_order + "'");
   const std::optional<ClosestHitOrder> closest_order = parse_closest_hit_order(closest_hit_order);
   if (!closest_order)
     throw Error("trace: closest_hit_order must be 'auto' or 'near', got '" + closest_hit_order + "'");
@@ -148,12 +148,12 @@ void register_trace(py::class_<Tree>& tree) {
       });
   tree.def("trace", &trace, py::arg("scene"), py::arg("rays"), py::arg("layout") = "bvh8", py::arg("query") = "closest",
            py::arg("order") = "split-axis", py::arg("threads") = py::none(), py::arg("repeats") = 3,
-           py::arg("wide_block") = py::none(), py::arg("rays_per_call") = 0, py::arg("any_hit_order") = "far",
+           py::arg("wide_block") = py::none(), py::arg("rays_per_call") = 0, py::arg("any_hit_order") = "auto",
            py::arg("closest_hit_order") = "auto",
            "Traces an n x 8 float32 ray array (see bvhopt.rays) through the tree laid out as `layout`: 'bvh8' (the default, as the command line's), 'bvh4' (wide SIMD nodes, collapsed from the binary tree) or 'bvh2' (binary nodes). "
            "`wide_block`: the wide collapse's cost of a 4-triangle leaf block (c_blk, as the command line's --wide-block; None: the library's default). "
            "`rays_per_call`: the timed passes trace the rays in calls of this many (1: one ray a call, as a renderer tracing a ray at a time; 0: blocks of 256), as the command line's --rays-per-call. "
-           "`any_hit_order`: bvh4 / bvh8 any-hit rays search from the ray's far end ('far', the default) or its near end ('near'), as the command line's --any-hit-order. "
+           "`any_hit_order`: bvh4 / bvh8 any-hit rays search from the ray's far end ('far'), or its near end ('near'), or from the far end but in slot order while the batch's rays mostly hit nothing ('auto', the default), as the command line's --any-hit-order. "
            "`closest_hit_order`: bvh4 / bvh8 closest-hit rays in batches enter children nearest first ('near'), or in slot order while the batch's rays mostly hit nothing ('auto', the default), as the command line's --closest-hit-order");
   tree.def_static("layouts", [] { return known_layouts(); });
 }

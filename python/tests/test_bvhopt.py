@@ -171,11 +171,18 @@ def test_rays_and_trace(cli, tmp_path, scene):
     for bad in (-1, 1000001):
         with pytest.raises(bvhopt.Error, match="rays_per_call"):
             bvh.trace(scene, rays, layout="bvh8", repeats=1, rays_per_call=bad)
-    # any-hit rays from either end: the same answers, walked in other orders
+    # any-hit rays from either end, or (the default) in slot order where a batch mostly
+    # misses: the same answers, walked in other orders
     shadow = bvhopt.rays(scene, "shadow", count=3000, seed=2, bvh=bvh)
-    far = bvh.trace(scene, shadow, layout="bvh8", query="any", repeats=1)
+    far = bvh.trace(scene, shadow, layout="bvh8", query="any", repeats=1, any_hit_order="far")
     near = bvh.trace(scene, shadow, layout="bvh8", query="any", repeats=1, any_hit_order="near")
     np.testing.assert_array_equal(far.triangle_id != 0xFFFFFFFF, near.triangle_id != 0xFFFFFFFF)
+    ao_any = bvhopt.rays(scene, "ao", count=3000, seed=3, bvh=bvh)
+    by_default = bvh.trace(scene, ao_any, layout="bvh8", query="any", repeats=1)
+    asked_auto = bvh.trace(scene, ao_any, layout="bvh8", query="any", repeats=1, any_hit_order="auto")
+    from_far = bvh.trace(scene, ao_any, layout="bvh8", query="any", repeats=1, any_hit_order="far")
+    np.testing.assert_array_equal(by_default.triangle_id != 0xFFFFFFFF, from_far.triangle_id != 0xFFFFFFFF)
+    np.testing.assert_array_equal(by_default.steps, asked_auto.steps)
     assert 0 < far.hit_rate < 1
     assert not np.array_equal(far.steps, near.steps)
     with pytest.raises(bvhopt.Error, match="any_hit_order"):

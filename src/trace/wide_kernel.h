@@ -888,28 +888,64 @@ void trace_interleaved(const Batch& b) {
   b.counters->triangle_tests += tests;
 }
 
-// Closest-hit rays of an incoherent batch go in runs of kOrderRun: the first nearest first,
-// each after it in slot order (enter_in_slot_order) while at most one ray in kMissingShare
-// of those traced so far in the batch hit anything. A ray that hits nothing visits the same
-// boxes in any order, so the near-first order only pays on the rays that hit: ambient
-// occlusion rays off the closed meshes, 2-7 % of them blocked, and rays leaving a scene. The
-// choice depends on the hits alone, which are exact, so every ISA and thread count makes it
-// alike.
+// The rays of an incoherent batch go in runs of kOrderRun: the first in the usual order
+// (closest hit: nearest first; any hit: as AnyHitOrder asks), each after it in slot order
+// (enter_in_slot_order) while at most one ray in kMissingShare of those traced so far in the
+// batch hit anything and they took kMinSlotOrderSteps steps a ray or more. A ray that hits
+// nothing visits the same boxes in any order, so the ordering only pays on the rays that
+// hit: ambient occlusion rays off the closed meshes, 2-7 % of them blocked, and rays leaving
+// a scene. Rays that take few steps enter few nodes with several children, where the
+// ordering costs little, and the one-child path's branch, which the slot order does not
+// take, is well predicted there: staircase's AO rays (2.4 steps a ray, 1.4 % blocked) ran
+// at about 0.8 of their nearest-first speed in slot order (docs/wide-bvh.md). The choice
+// depends on the hits and the counted steps alone, which are exact and the same on every ISA
+// for the same order, so every ISA and thread count makes it alike (but for any-hit rays
+// from the far end, whose order differs between the SSE kernel and the compacting ones; see
+// order_children).
 constexpr size_t kOrderRun = 32;
 constexpr size_t kMissingShare = 8;
+constexpr uint64_t kMinSlotOrderSteps = 4;
 
-// Closest-hit rays [begin, end) of the batch, one after the other; how many hit. A function
-// of its own for each order: with both traversals inlined into one loop, the closed meshes'
-// AO rays lost what the slot order gains (one run: 7-11 % slower than the slot order
-// throughout on beast, bunny, horse and nefertiti, whose AO rays hit 2-6 % of the time).
-template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kCompact, bool kSlotOrder>
-__attribute__((noinline)) size_t trace_closest_run(const Batch& b, size_t begin, size_t end) {
+// Rays [begin, end) of the batch, one after the other, for the query the batch holds; how
+// many hit. A function of its own for each order: with both traversals inlined into one
+// loop, the closed meshes' AO rays lost what the slot order gains (one run: 7-11 % slower
+// than the slot order throughout on beast, bunny, horse and nefertiti, whose AO rays hit
+// 2-6 % of the time).
+template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kCompact, bool kAny, bool kSlotOrder>
+__attribute__((noinline)) size_t trace_run(const Batch& b, size_t begin, size_t end) {
   TraceCounters& c = *b.counters;
   const Stack stack{b.stack_words, b.stack_t};
   size_t hit = 0;
-  for (size_t i = begin; i < end; ++i)
-    hit += traverse<W, kTest, kOrder, false, kCompact, kSlotOrder>(b.arena, b.root, stack, b.rays[i], b.hits[i], c, 0);
+  if constexpr (kAny) {
+    Hit unused;
+    for (size_t i = begin; i < end; ++i) {
+      const bool found =
+          traverse<W, kTest, kOrder, true, kCompact, kSlotOrder>(b.arena, b.root, stack, b.rays[i], unused, c, b.any_octant_flip);
+      b.any_hits[i] = found ? 1 : 0;
+      hit += found;
+    }
+  } else {
+    for (size_t i = begin; i < end; ++i)
+      hit += traverse<W, kTest, kOrder, false, kCompact, kSlotOrder>(b.arena, b.root, stack, b.rays[i], b.hits[i], c, 0);
+  }
   return hit;
+}
+
+// Rays [begin, end) in runs, each run's order chosen as above.
+template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kCompact, bool kAny>
+void trace_adaptive(const Batch& b, size_t begin, size_t end) {
+  size_t hit = 0;
+  uint64_t steps = 0;
+  for (size_t run = begin; run < end; run += kOrderRun) {
+    const size_t stop = end - run < kOrderRun ? end : run + kOrderRun;
+    const uint64_t traced = run - begin;
+    // The first run in the usual order: nothing is known yet.
+    const bool slot_order = traced != 0 && hit * kMissingShare <= traced && steps >= kMinSlotOrderSteps * traced;
+    const uint32_t steps_before = b.counters->steps;
+    hit += slot_order ? trace_run<W, kTest, kOrder, kCompact, kAny, true>(b, run, stop)
+                      : trace_run<W, kTest, kOrder, kCompact, kAny, false>(b, run, stop);
+    steps += uint32_t(b.counters->steps - steps_before);
+  }
 }
 
 // Rays [begin, end) of the batch, one after the other.
@@ -917,18 +953,14 @@ template <uint32_t W, TriangleTest kTest, NearFirst kOrder, bool kCompact>
 void trace_range(const Batch& b, size_t begin, size_t end) {
   TraceCounters& c = *b.counters;
   const Stack stack{b.stack_words, b.stack_t};
+  if (b.slot_order_when_missing && !b.coherent && kOrder == NearFirst::octant_order) {
+    if (b.hits)
+      trace_adaptive<W, kTest, kOrder, kCompact, false>(b, begin, end);
+    else
+      trace_adaptive<W, kTest, kOrder, kCompact, true>(b, begin, end);
+    return;
+  }
   if (b.hits) {
-    if (b.slot_order_when_missing && !b.coherent && kOrder == NearFirst::octant_order) {
-      size_t hit = 0;
-      for (size_t run = begin; run < end; run += kOrderRun) {
-        const size_t stop = end - run < kOrderRun ? end : run + kOrderRun;
-        // The first run near first: nothing is known yet.
-        const bool slot_order = run != begin && hit * kMissingShare <= run - begin;
-        hit += slot_order ? trace_closest_run<W, kTest, kOrder, kCompact, true>(b, run, stop)
-                          : trace_closest_run<W, kTest, kOrder, kCompact, false>(b, run, stop);
-      }
-      return;
-    }
     for (size_t i = begin; i < end; ++i)
       traverse<W, kTest, kOrder, false, kCompact>(b.arena, b.root, stack, b.rays[i], b.hits[i], c, 0);
   } else {

@@ -25,8 +25,8 @@ struct Batch {
   // Whether the rays go mostly the same way, ray after ray (camera rays): the kernel then
   // orders children with branches the CPU predicts, else (AVX-512) without branches.
   bool coherent;
-  // Closest-hit rays of an incoherent batch may enter children in slot order where few of
-  // them hit anything (ClosestHitOrder::adaptive; see trace_range).
+  // The rays of an incoherent batch may enter children in slot order where few of them hit
+  // anything (ClosestHitOrder::adaptive, AnyHitOrder::adaptive; see trace_adaptive).
   bool slot_order_when_missing;
   // The traversal stacks, one per lane, each as two arrays of at least
   // WideBvh::stack_entries() entries: child words and the entry distances of their boxes.
@@ -44,7 +44,7 @@ struct Batch {
   uint8_t* any_hits;  // 1 where anything is hit
   TraceCounters* counters;
   // XORed into an any-hit ray's octant: 7 walks the octant order from its far end
-  // (AnyHitOrder::far_first), 0 as closest-hit rays do.
+  // (AnyHitOrder::far_first and adaptive), 0 as closest-hit rays do.
   uint32_t any_octant_flip;
 };
 

@@ -43,11 +43,19 @@ static_assert(kMaxTraceLanes == wide_kernels::kMaxLanes);
 }  // namespace
 
 std::string_view any_hit_order_name(AnyHitOrder order) {
-  return order == AnyHitOrder::near_first ? "near" : "far";
+  switch (order) {
+    case AnyHitOrder::near_first:
+      return "near";
+    case AnyHitOrder::adaptive:
+      return "auto";
+    case AnyHitOrder::far_first:
+      break;
+  }
+  return "far";
 }
 
 std::optional<AnyHitOrder> parse_any_hit_order(std::string_view name) {
-  for (AnyHitOrder o : {AnyHitOrder::far_first, AnyHitOrder::near_first})
+  for (AnyHitOrder o : {AnyHitOrder::adaptive, AnyHitOrder::far_first, AnyHitOrder::near_first})
     if (name == any_hit_order_name(o)) return o;
   return std::nullopt;
 }
@@ -64,8 +72,8 @@ std::optional<ClosestHitOrder> parse_closest_hit_order(std::string_view name) {
 
 WideTracer::WideTracer(const FlatBvh& bvh, const Mesh& mesh, const WideTracerOptions& options)
     : bvh_(bvh, mesh, options.layout), isa_(options.isa ? *options.isa : default_isa()), near_first_(options.near_first),
-      any_octant_flip_(options.any_hit_order == AnyHitOrder::far_first ? 7u : 0u),
-      closest_hit_order_(options.closest_hit_order),
+      any_octant_flip_(options.any_hit_order == AnyHitOrder::near_first ? 0u : 7u),
+      any_hit_order_(options.any_hit_order), closest_hit_order_(options.closest_hit_order),
       lanes_(options.lanes == 0 ? kMaxTraceLanes : options.lanes),
       scatter_distance_(bvh.nodes.empty() ? 0.0f : wide_kernels::scatter_distance(bvh.nodes[0].box)) {
   if (!isa_supported(isa_)) throw Error("wide tracer: this CPU does not support " + std::string(isa_name(isa_)));
@@ -206,6 +214,7 @@ void WideTracer::any(const Ray* rays, size_t count, uint8_t* hit, TraceCounters&
     b.rays = rays;
     b.count = count;
     b.any_hits = hit;
+    b.slot_order_when_missing = any_hit_order_ == AnyHitOrder::adaptive;
   });
 }
 
